@@ -377,7 +377,12 @@ fn the_cli_prints_a_table_and_a_json_report() {
 
     // Bad input: one clear line naming the file.
     let bad = dir.path().join("bad.geojson");
-    std::fs::write(&bad, r#"{"type":"FeatureCollection","features":[{"type":"Feature","geometry":null,"properties":{"id":"x","class":"solid_line"}}]}"#).unwrap();
+    let no_layer = r#"{"type":"Feature","geometry":null,"properties":{"id":"x","class":"solid_line"}}"#;
+    std::fs::write(
+        &bad,
+        format!(r#"{{"type":"FeatureCollection","features":[{no_layer}]}}"#),
+    )
+    .unwrap();
     let out = std::process::Command::new(bin)
         .args(["evaluate", "--truth"])
         .arg(&tp)

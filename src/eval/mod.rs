@@ -28,8 +28,18 @@
 //! **Reference.** Yao et al. 2019/2021 (pixel level, solid-line length), Pan et al. 2019
 //! (object level, corner RMSE), see `../shared/papers/README.md`.
 //!
-//! **Complexity.** Dominated by the rasterisation, O(C log C) in row crossings (≈ 1 s for a
+//! **Complexity.** Dominated by the rasterisation, O(C log C) in row crossings (≈ 0.3 s for a
 //! 1 km drive at 0.05 m), and the polygon intersections of overlapping pairs.
+//!
+//! [`evaluate`]: crate::eval::evaluate
+//! [`Extraction`]: crate::pipeline::types::Extraction
+//! [`Report`]: crate::eval::Report
+//! [`pixel`]: crate::eval::pixel
+//! [`objects`]: crate::eval::objects
+//! [`lanes`]: crate::eval::lanes
+//! [`corners`]: crate::eval::corners
+//! [`raster`]: crate::eval::raster
+//! [`EvalOptions`]: crate::eval::EvalOptions
 
 pub mod corners;
 pub mod lanes;
@@ -552,7 +562,8 @@ impl Report {
         );
         let _ = writeln!(
             s,
-            "  lane RMSE {}, pieces per truth line mean {} max {}, unmatched truth lines {}, class agreement {}",
+            "  lane RMSE {}, pieces per truth line mean {} max {}, unmatched truth lines {}, \
+             class agreement {}",
             m(l.rmse_m),
             f(l.fragmentation_mean),
             l.fragmentation_max.map_or("n/a".into(), |x| x.to_string()),
@@ -601,7 +612,8 @@ impl Report {
         );
         let _ = writeln!(
             s,
-            "  macro-F1 {}, classification accuracy {}, mean IoU {}, solid-line fragments {} truth / {} result",
+            "  macro-F1 {}, classification accuracy {}, mean IoU {}, \
+             solid-line fragments {} truth / {} result",
             f(ob.macro_f1),
             f(ob.classification_accuracy),
             f(ob.mean_iou),

@@ -182,10 +182,14 @@ mod tests {
         assert!((strict.scores.recall.unwrap() - 0.4).abs() < 1e-3);
     }
 
+    /// Up to 5 axis-aligned rectangles (x, y, w, h) in a 20 m square.
+    fn rects() -> impl Strategy<Value = Vec<(f64, f64, f64, f64)>> {
+        proptest::collection::vec((0.0f64..20.0, 0.0f64..20.0, 0.1f64..3.0, 0.1f64..3.0), 0..6)
+    }
+
     proptest! {
         #[test]
-        fn pixel_f_is_symmetric(a in proptest::collection::vec((0.0f64..20.0, 0.0f64..20.0, 0.1f64..3.0, 0.1f64..3.0), 0..6),
-                                b in proptest::collection::vec((0.0f64..20.0, 0.0f64..20.0, 0.1f64..3.0, 0.1f64..3.0), 0..6)) {
+        fn pixel_f_is_symmetric(a in rects(), b in rects()) {
             let ms = |v: &Vec<(f64, f64, f64, f64)>| -> Vec<Marking> {
                 v.iter().map(|&(x, y, w, h)| bar(MarkingClass::Unknown, x, y, w, h)).collect()
             };
