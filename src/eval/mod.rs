@@ -493,6 +493,21 @@ pub fn evaluate_files(truth: &Path, result: &Path, opts: &EvalOptions) -> Result
     evaluate(&t, &r, opts)
 }
 
+/// Column header of the confusion table: at most 9 characters.
+fn short_label(label: &str) -> &str {
+    match label {
+        "solid_line" => "solid",
+        "dashed_line" => "dashed",
+        "straight_arrow" => "straight",
+        "left_arrow" => "left",
+        "right_arrow" => "right",
+        "straight_left_arrow" => "str+left",
+        "straight_right_arrow" => "str+right",
+        "stop_line" => "stop",
+        other => other,
+    }
+}
+
 fn f(v: Option<f64>) -> String {
     v.map_or_else(|| "n/a".into(), |x| format!("{x:.4}"))
 }
@@ -621,16 +636,17 @@ impl Report {
             ob.solid_line_fragments[1]
         );
         if ob.confusion.labels.len() > 1 {
+            // Full names on the rows, short ones on the columns (legend: the row names).
             let w = ob.confusion.labels.iter().map(String::len).max().unwrap_or(4) + 2;
             let _ = write!(s, "\nconfusion (rows truth, columns result)\n  {:<w$}", "");
             for l in &ob.confusion.labels {
-                let _ = write!(s, "{l:>w$}");
+                let _ = write!(s, "{:>10}", short_label(l));
             }
             let _ = writeln!(s);
             for (label, row) in ob.confusion.labels.iter().zip(&ob.confusion.counts) {
                 let _ = write!(s, "  {label:<w$}");
                 for v in row {
-                    let _ = write!(s, "{v:>w$}");
+                    let _ = write!(s, "{v:>10}");
                 }
                 let _ = writeln!(s);
             }
