@@ -159,12 +159,16 @@ pub fn lane_scores(truth: &[LaneLine], result: &[LaneLine], tol_m: f64, sample_m
                 .map(|(&t, _)| t)
         })
         .collect();
+    let mut t_line_len = vec![0.0; truth.len()];
+    for s in &ts {
+        t_line_len[s.line] += s.w;
+    }
     let counts: Vec<usize> = pieces
         .iter()
-        .zip(truth)
+        .zip(&t_line_len)
         .enumerate()
-        .map(|(k, (m, t))| {
-            let min_m = (0.2 * t.length_m.max(0.0)).min(1.0);
+        .map(|(k, (m, &len_m))| {
+            let min_m = (0.2 * len_m).min(1.0);
             m.iter()
                 .filter(|&(&r, &len)| len >= min_m && owner[r] == Some(k))
                 .count()
