@@ -426,7 +426,7 @@ fn localise(truth: &Extraction, result: &Extraction) -> (Extraction, Extraction)
 }
 
 /// Round every float of a serialisable value to 6 decimals (stable JSON, exact self-scores).
-fn rounded<T: Serialize + DeserializeOwned>(v: &T) -> T {
+fn rounded<T: Serialize + DeserializeOwned + Clone>(v: &T) -> T {
     fn walk(v: &mut serde_json::Value) {
         match v {
             serde_json::Value::Number(n) if n.is_f64() => {
@@ -438,14 +438,42 @@ fn rounded<T: Serialize + DeserializeOwned>(v: &T) -> T {
             _ => {}
         }
     }
-    let mut value = serde_json::to_value(v).expect("report serialises");
+    // Inputs are checked finite, so the round trip cannot fail; if it did, the unrounded
+    // value is still correct.
+    let Ok(mut value) = serde_json::to_value(v) else {
+        return v.clone();
+    };
     walk(&mut value);
-    serde_json::from_value(value).expect("report deserialises")
+    serde_json::from_value(value).unwrap_or_else(|_| v.clone())
+}
+
+/// Every vertex finite, outlines with ≥ 3 vertices, lane lines with ≥ 2.
+fn check_input(ex: &Extraction, who: &str) -> Result<(), EvalError> {
+    let finite = |pts: &[[f64; 2]]| pts.iter().all(|p| p[0].is_finite() && p[1].is_finite());
+    for m in &ex.markings {
+        if m.outline.len() < 3 || !finite(&m.outline) {
+            return Err(EvalError::Input(format!(
+                "{who} marking {}: the outline needs at least 3 finite vertices",
+                m.id
+            )));
+        }
+    }
+    for l in &ex.lane_lines {
+        if l.line.len() < 2 || !finite(&l.line) {
+            return Err(EvalError::Input(format!(
+                "{who} lane_line {}: the line needs at least 2 finite vertices",
+                l.id
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// Score `result` against `truth`.
 pub fn evaluate(truth: &Extraction, result: &Extraction, opts: &EvalOptions) -> Result<Report, EvalError> {
     opts.validate().map_err(EvalError::Options)?;
+    check_input(truth, "truth")?;
+    check_input(result, "result")?;
     let (t, r, working_crs, notes) = align(truth, result).map_err(EvalError::Crs)?;
     let (t, r) = localise(&t, &r);
 
@@ -491,6 +519,21 @@ pub fn evaluate_files(truth: &Path, result: &Path, opts: &EvalOptions) -> Result
     let t = read_geojson(truth).map_err(|e| EvalError::Input(e.to_string()))?;
     let r = read_geojson(result).map_err(|e| EvalError::Input(e.to_string()))?;
     evaluate(&t, &r, opts)
+}
+
+/// Column header of the confusion table: at most 9 characters.
+fn short_label(label: &str) -> &str {
+    match label {
+        "solid_line" => "solid",
+        "dashed_line" => "dashed",
+        "straight_arrow" => "straight",
+        "left_arrow" => "left",
+        "right_arrow" => "right",
+        "straight_left_arrow" => "str+left",
+        "straight_right_arrow" => "str+right",
+        "stop_line" => "stop",
+        other => other,
+    }
 }
 
 fn f(v: Option<f64>) -> String {
@@ -621,16 +664,17 @@ impl Report {
             ob.solid_line_fragments[1]
         );
         if ob.confusion.labels.len() > 1 {
+            // Full names on the rows, short ones on the columns (legend: the row names).
             let w = ob.confusion.labels.iter().map(String::len).max().unwrap_or(4) + 2;
             let _ = write!(s, "\nconfusion (rows truth, columns result)\n  {:<w$}", "");
             for l in &ob.confusion.labels {
-                let _ = write!(s, "{l:>w$}");
+                let _ = write!(s, "{:>10}", short_label(l));
             }
             let _ = writeln!(s);
             for (label, row) in ob.confusion.labels.iter().zip(&ob.confusion.counts) {
                 let _ = write!(s, "  {label:<w$}");
                 for v in row {
-                    let _ = write!(s, "{v:>w$}");
+                    let _ = write!(s, "{v:>10}");
                 }
                 let _ = writeln!(s);
             }
@@ -677,6 +721,24 @@ mod tests {
         assert_eq!(harmonic(Some(1.0), Some(1.0)), Some(1.0));
         assert_eq!(Prf::from_counts(0, 0, 0).f_score, None);
         assert_eq!(Prf::from_counts(0, 2, 0).f_score, Some(0.0));
+    }
+
+    #[test]
+    fn bad_geometry_is_an_error_not_a_panic() {
+        use crate::pipeline::types::{LaneLine, LaneLineClass};
+        let ex = Extraction {
+            lane_lines: vec![LaneLine {
+                id: "l7".into(),
+                class: LaneLineClass::SolidLine,
+                line: vec![[0.0, 0.0], [f64::NAN, 1.0]],
+                confidence: 1.0,
+                length_m: f64::NAN,
+                marking_ids: vec![],
+            }],
+            ..Default::default()
+        };
+        let e = evaluate(&Extraction::default(), &ex, &EvalOptions::default()).unwrap_err();
+        assert!(e.to_string().contains("result lane_line l7"), "{e}");
     }
 
     #[test]

@@ -88,7 +88,7 @@ pub fn solid_line(truth: &[Marking], result: &[Marking], pixel_m: f64, solid_tol
         ms.iter()
             .filter(|m| m.class == MarkingClass::SolidLine)
             .map(|m| {
-                if m.length_m > 0.0 {
+                if m.length_m.is_finite() && m.length_m > 0.0 {
                     m.length_m
                 } else {
                     outline_dimensions(&m.outline).0

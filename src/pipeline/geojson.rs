@@ -53,6 +53,14 @@ pub enum CrsMode {
 }
 
 impl CrsMode {
+    /// The contract's default: `wgs84` whenever the input CRS is known, else `native`.
+    pub fn default_for(crs: Option<&Crs>) -> CrsMode {
+        match crs {
+            Some(c) if c.epsg.is_some() || c.wkt.is_some() => CrsMode::Wgs84,
+            _ => CrsMode::Native,
+        }
+    }
+
     pub fn as_str(self) -> &'static str {
         match self {
             CrsMode::Native => "native",
@@ -698,6 +706,13 @@ mod tests {
                 .unwrap()
                 < 180.0
         );
+    }
+
+    #[test]
+    fn default_mode_follows_the_contract() {
+        assert_eq!(CrsMode::default_for(Some(&Crs::epsg(32650))), CrsMode::Wgs84);
+        assert_eq!(CrsMode::default_for(Some(&Crs::default())), CrsMode::Native);
+        assert_eq!(CrsMode::default_for(None), CrsMode::Native);
     }
 
     #[test]
