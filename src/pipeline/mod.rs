@@ -19,6 +19,8 @@ pub mod io;
 pub mod params;
 /// Stage 1: pavement extraction guided by the trajectory.
 pub mod pavement;
+/// Stage 1, alternative: the scan-line pavement method (Yao 2021).
+pub mod pavement_scanline;
 /// Stage 2: IDW intensity rasterisation with range/incidence normalisation.
 pub mod rasterize;
 /// Reprojection between the input CRS and WGS84.
