@@ -5,6 +5,8 @@
 //! The service and the CLI call [`run`] once per job, on a rayon pool, and follow it
 //! through a [`Progress`] callback.
 
+/// Chunking along the trajectory (bounded memory), with spill files.
+pub mod chunk;
 /// Stage 5: geometric (and learned) classification of clusters.
 pub mod classify;
 /// Stage 4: Euclidean clustering of marking points.
