@@ -11,6 +11,8 @@ pub mod chunk;
 pub mod classify;
 /// Stage 4: Euclidean clustering of marking points.
 pub mod cluster;
+/// The driver behind [`run`]: chunk loop, streaming clusters, statistics.
+pub mod driver;
 /// Errors of the pipeline, split into fatal input errors and retryable ones.
 pub mod error;
 /// GeoJSON output (and input, for truth files and evaluation).
@@ -63,13 +65,14 @@ pub struct Inputs {
 }
 
 /// Run the whole pipeline on the files of one job.
+///
+/// Stages report progress under the stable names of [`driver::STAGES`] and the job can be
+/// cancelled at every stage boundary. Memory stays bounded by a chunk of the drive
+/// (`params.chunk`), see [`driver`] and [`chunk`].
 pub fn run(
     inputs: &Inputs,
     params: &params::ValidParams,
     progress: &dyn Progress,
 ) -> Result<Extraction, PipelineError> {
-    let _ = (inputs, params, progress);
-    Err(PipelineError::Internal(
-        "the pipeline is not assembled yet".into(),
-    ))
+    driver::run_with_stats(inputs, params, progress).map(|(ex, _)| ex)
 }
