@@ -111,6 +111,11 @@ pub fn run_with_stats(
     ctx.progress.report("read", 0.0);
     let t0 = Instant::now();
     let traj_abs = io::read_trajectory(&inputs.trajectory)?;
+    // Every tile's header is checked before the long read starts: a broken third tile
+    // fails in a second, not after the first two were processed.
+    for path in &inputs.points {
+        io::inspect_points(path)?;
+    }
     let first = traj_abs.poses()[0];
     let origin = [
         first.x.floor(),
