@@ -157,9 +157,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 fn write_output(path: &Path, ex: &Extraction, mode: CrsMode) -> anyhow::Result<()> {
-    // Until the WGS84 writer lands, both modes write native coordinates.
-    let _ = mode;
-    let value = geojson::to_native(ex);
-    std::fs::write(path, serde_json::to_vec(&value)?)?;
+    geojson::write_geojson(path, ex, mode)?;
     Ok(())
 }

@@ -77,6 +77,8 @@ struct Ctx<'a> {
     params: &'a ValidParams,
     progress: &'a dyn Progress,
     stats: RunStats,
+    /// When set, every marking point is also appended here (job-local coordinates).
+    collect: Option<PointCloud>,
 }
 
 impl Ctx<'_> {
@@ -99,23 +101,42 @@ pub fn run_with_stats(
     params: &ValidParams,
     progress: &dyn Progress,
 ) -> Result<(Extraction, RunStats), PipelineError> {
-    let t_start = Instant::now();
     let mut ctx = Ctx {
         params,
         progress,
         stats: RunStats::default(),
+        collect: None,
     };
+    let ex = run_ctx(&mut ctx, inputs)?;
+    Ok((ex, ctx.stats))
+}
+
+/// Run the pipeline and also return every marking point (absolute coordinates in the
+/// returned cloud's `origin` + local), for per-point evaluation against labelled data.
+pub fn run_collecting_marking_points(
+    inputs: &Inputs,
+    params: &ValidParams,
+    progress: &dyn Progress,
+) -> Result<(Extraction, PointCloud), PipelineError> {
+    let mut ctx = Ctx {
+        params,
+        progress,
+        stats: RunStats::default(),
+        collect: Some(PointCloud::default()),
+    };
+    let ex = run_ctx(&mut ctx, inputs)?;
+    Ok((ex, ctx.collect.take().unwrap_or_default()))
+}
+
+fn run_ctx(ctx: &mut Ctx<'_>, inputs: &Inputs) -> Result<Extraction, PipelineError> {
+    let t_start = Instant::now();
+    let params = ctx.params;
     if inputs.points.is_empty() {
         return Err(PipelineError::Params("no point files given".into()));
     }
     ctx.progress.report("read", 0.0);
     let t0 = Instant::now();
     let traj_abs = io::read_trajectory(&inputs.trajectory)?;
-    // Every tile's header is checked before the long read starts: a broken third tile
-    // fails in a second, not after the first two were processed.
-    for path in &inputs.points {
-        io::inspect_points(path)?;
-    }
     let first = traj_abs.poses()[0];
     let origin = [
         first.x.floor(),
@@ -126,7 +147,7 @@ pub fn run_with_stats(
     let max_off = params.pavement.max_offset_m;
     let plan = Plan::new(params, -max_off, traj.length_m() + max_off);
     let mut store = Store::new(plan, params.chunk.memory_budget_mb);
-    let crs = read_into(&mut ctx, inputs, origin, &traj, &mut store)?;
+    let crs = read_into(ctx, inputs, origin, &traj, &mut store)?;
     ctx.stats.add(0, t0);
     ctx.stats.spilled_points = store.spilled_points;
     ctx.check()?;
@@ -146,21 +167,27 @@ pub fn run_with_stats(
         let (marks, marks_m) = if pts.is_empty() {
             (PointCloud::with_origin(origin), Vec::new())
         } else {
-            marking_points(&mut ctx, &pts, origin, (core_lo, core_hi), base, step)?
+            marking_points(ctx, &pts, origin, (core_lo, core_hi), base, step)?
         };
         drop(pts);
         ctx.progress.report("cluster", base + 0.8 * step);
         let t0 = Instant::now();
         let last = ci + 1 == n_chunks;
+        if let Some(all) = ctx.collect.as_mut() {
+            if all.is_empty() {
+                *all = PointCloud::with_origin(origin);
+                all.gps_time = marks.gps_time.as_ref().map(|_| Vec::new());
+            }
+            all.extend_from(&marks);
+        }
         let complete = streaming.feed(marks, marks_m, (!last).then_some(core_hi), cluster_groups, params);
         ctx.stats.clusters += complete.len() as u64;
         ctx.stats.add(4, t0);
         ctx.check()?;
         ctx.progress.report("classify", base + 0.9 * step);
-        markings.extend(finish_clusters(&mut ctx, complete, &traj, origin)?);
+        markings.extend(finish_clusters(ctx, complete, &traj, origin)?);
         ctx.check()?;
     }
-    ctx.stats.points_processed = ctx.stats.points_processed.max(0);
 
     // Stable ids in mileage order, then lane lines over the whole drive.
     ctx.progress.report("vectorize", READ_SHARE + CHUNK_SHARE);
@@ -178,14 +205,11 @@ pub fn run_with_stats(
     ctx.stats.add(6, t0);
     ctx.progress.report("vectorize", 1.0);
     ctx.stats.total_seconds = t_start.elapsed().as_secs_f64();
-    Ok((
-        Extraction {
-            markings,
-            lane_lines,
-            crs,
-        },
-        ctx.stats,
-    ))
+    Ok(Extraction {
+        markings,
+        lane_lines,
+        crs,
+    })
 }
 
 /// Stream every tile into the chunk store; returns the CRS of the first tile that has one.
@@ -199,32 +223,55 @@ fn read_into(
     let index = StationIndex::new(traj, 1.0);
     let max_off = ctx.params.pavement.max_offset_m;
     let (m_lo, m_hi) = (-max_off, traj.length_m() + max_off);
+    let need_intensity = ctx.params.threshold.method != threshold::Method::None;
     let mut crs: Option<Crs> = None;
-    let n_tiles = inputs.points.len();
-    for (ti, path) in inputs.points.iter().enumerate() {
+    let total: u64 = inputs
+        .points
+        .iter()
+        .map(|p| io::inspect_points(p).map(|s| s.point_count))
+        .sum::<Result<u64, _>>()?
+        .max(1);
+    let mut batch = PointCloud::default();
+    for path in &inputs.points {
         ctx.check()?;
-        let cloud = io::read_points(&[path.as_path()])?;
+        let mut reader = io::PointReader::open(path)?;
+        reader.set_origin(origin);
         if crs.is_none() {
-            crs = cloud.crs.clone();
+            crs = reader.crs().cloned();
         }
-        ctx.stats.points_read += cloud.len() as u64;
-        let shift = [
-            cloud.origin[0] - origin[0],
-            cloud.origin[1] - origin[1],
-            cloud.origin[2] - origin[2],
-        ];
-        push_batch(
-            &cloud,
-            shift,
-            &index,
-            (m_lo, m_hi),
-            max_off,
-            store,
-            &mut ctx.stats,
-        );
-        store.maybe_spill()?;
-        ctx.progress
-            .report("read", READ_SHARE * (ti + 1) as f64 / n_tiles as f64);
+        let chunk = reader.preferred_chunk().max(1 << 18);
+        let mut n_tile = 0u64;
+        while reader.next_chunk(&mut batch, chunk)? > 0 {
+            n_tile += batch.len() as u64;
+            ctx.stats.points_read += batch.len() as u64;
+            push_batch(
+                &batch,
+                [0.0; 3],
+                &index,
+                (m_lo, m_hi),
+                max_off,
+                store,
+                &mut ctx.stats,
+            );
+            store.maybe_spill()?;
+            ctx.progress
+                .report("read", READ_SHARE * ctx.stats.points_read as f64 / total as f64);
+            ctx.check()?;
+        }
+        if need_intensity && n_tile > 0 && reader.nonzero_intensity_count() == 0 {
+            return Err(PipelineError::input(
+                path,
+                "has no intensity values (all zero); marking extraction needs intensity",
+            ));
+        }
+    }
+    if ctx.stats.points_near_track == 0 && ctx.stats.points_read > 0 {
+        return Err(PipelineError::input(
+            &inputs.trajectory,
+            format!(
+                "no point lies within {max_off} m of this trajectory (another drive, or a different CRS?)"
+            ),
+        ));
     }
     Ok(crs)
 }
