@@ -28,8 +28,18 @@
 //! **Reference.** Yao et al. 2019/2021 (pixel level, solid-line length), Pan et al. 2019
 //! (object level, corner RMSE), see `../shared/papers/README.md`.
 //!
-//! **Complexity.** Dominated by the rasterisation, O(C log C) in row crossings (≈ 1 s for a
+//! **Complexity.** Dominated by the rasterisation, O(C log C) in row crossings (≈ 0.3 s for a
 //! 1 km drive at 0.05 m), and the polygon intersections of overlapping pairs.
+//!
+//! [`evaluate`]: crate::eval::evaluate
+//! [`Extraction`]: crate::pipeline::types::Extraction
+//! [`Report`]: crate::eval::Report
+//! [`pixel`]: crate::eval::pixel
+//! [`objects`]: crate::eval::objects
+//! [`lanes`]: crate::eval::lanes
+//! [`corners`]: crate::eval::corners
+//! [`raster`]: crate::eval::raster
+//! [`EvalOptions`]: crate::eval::EvalOptions
 
 pub mod corners;
 pub mod lanes;
@@ -544,7 +554,7 @@ impl Report {
         );
         let _ = writeln!(
             s,
-            "  truth {:.1} m, result {:.1} m, solid-line truth {:.1} m found {}",
+            "  lane-line length: truth {:.1} m, result {:.1} m; solid-line length: truth {:.1} m, found {}",
             l.truth_length_m,
             l.result_length_m,
             sl.truth_length_m,
@@ -552,7 +562,8 @@ impl Report {
         );
         let _ = writeln!(
             s,
-            "  lane RMSE {}, pieces per truth line mean {} max {}, unmatched truth lines {}, class agreement {}",
+            "  lane RMSE {}, pieces per truth line mean {} max {}, unmatched truth lines {}, \
+             class agreement {}",
             m(l.rmse_m),
             f(l.fragmentation_mean),
             l.fragmentation_max.map_or("n/a".into(), |x| x.to_string()),
@@ -601,7 +612,8 @@ impl Report {
         );
         let _ = writeln!(
             s,
-            "  macro-F1 {}, classification accuracy {}, mean IoU {}, solid-line fragments {} truth / {} result",
+            "  macro-F1 {}, classification accuracy {}, mean IoU {}, \
+             solid-line fragments {} truth / {} result",
             f(ob.macro_f1),
             f(ob.classification_accuracy),
             f(ob.mean_iou),
@@ -609,16 +621,16 @@ impl Report {
             ob.solid_line_fragments[1]
         );
         if ob.confusion.labels.len() > 1 {
-            let short = |l: &str| l.chars().take(9).collect::<String>();
-            let _ = write!(s, "\nconfusion (rows truth, columns result)\n  {:<22}", "");
+            let w = ob.confusion.labels.iter().map(String::len).max().unwrap_or(4) + 2;
+            let _ = write!(s, "\nconfusion (rows truth, columns result)\n  {:<w$}", "");
             for l in &ob.confusion.labels {
-                let _ = write!(s, "{:>10}", short(l));
+                let _ = write!(s, "{l:>w$}");
             }
             let _ = writeln!(s);
             for (label, row) in ob.confusion.labels.iter().zip(&ob.confusion.counts) {
-                let _ = write!(s, "  {label:<22}");
+                let _ = write!(s, "  {label:<w$}");
                 for v in row {
-                    let _ = write!(s, "{v:>10}");
+                    let _ = write!(s, "{v:>w$}");
                 }
                 let _ = writeln!(s);
             }

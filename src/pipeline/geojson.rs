@@ -27,6 +27,13 @@
 //! marking is one outline.
 //!
 //! **Complexity.** Linear in the number of vertices (plus one reprojection per vertex).
+//!
+//! [`to_geojson`]: crate::pipeline::geojson::to_geojson
+//! [`write_geojson`]: crate::pipeline::geojson::write_geojson
+//! [`from_geojson`]: crate::pipeline::geojson::from_geojson
+//! [`read_geojson`]: crate::pipeline::geojson::read_geojson
+//! [`CrsMode::Native`]: crate::pipeline::geojson::CrsMode::Native
+//! [`CrsMode::Wgs84`]: crate::pipeline::geojson::CrsMode::Wgs84
 
 use super::reproject::{EPSG_WGS84, Reprojector, crs_label};
 use super::types::{Crs, Extraction, LaneLine, LaneLineClass, Marking, MarkingClass};
@@ -706,7 +713,8 @@ mod tests {
     #[test]
     fn lonlat_without_crs_member_is_wgs84_and_measures_are_derived() {
         let text = r#"{"type":"FeatureCollection","features":[
-          {"type":"Feature","geometry":{"type":"Polygon","coordinates":[[[114.0,30.0],[114.0,30.00005],[114.000002,30.00005],[114.000002,30.0],[114.0,30.0]]]},
+          {"type":"Feature","geometry":{"type":"Polygon","coordinates":[[[114.0,30.0],[114.0,30.00005],
+            [114.000002,30.00005],[114.000002,30.0],[114.0,30.0]]]},
            "properties":{"id":7,"layer":"marking","class":"stop_line"}},
           {"type":"Feature","geometry":{"type":"LineString","coordinates":[[114.0,30.0],[114.0,30.0001]]},
            "properties":{"id":"a","layer":"lane_line","class":"solid_line","confidence":0.5}}]}"#;
@@ -729,56 +737,97 @@ mod tests {
         .unwrap_err()
     }
 
+    const SQUARE: &str = r#"{"type":"Polygon","coordinates":[[[0,0],[1,0],[1,1],[0,0]]]}"#;
+
+    /// One feature with the given geometry and properties.
+    fn feature_err(geometry: &str, props: &str) -> String {
+        err_of(&format!(
+            r#"{{"type":"Feature","geometry":{geometry},"properties":{{{props}}}}}"#
+        ))
+    }
+
     #[test]
     fn schema_errors_are_clear() {
-        let poly = r#"{"type":"Polygon","coordinates":[[[0,0],[1,0],[1,1],[0,0]]]}"#;
-        let e = err_of(&format!(
-            r#"{{"type":"Feature","geometry":{poly},"properties":{{"id":"a","class":"dashed_line"}}}}"#
-        ));
-        assert!(
-            e.contains("feature 0") && e.contains("missing property \"layer\""),
-            "{e}"
-        );
-        let e = err_of(&format!(
-            r#"{{"type":"Feature","geometry":{poly},"properties":{{"id":"a","layer":"marking","class":"zigzag"}}}}"#
-        ));
-        assert!(e.contains("unknown marking class \"zigzag\""), "{e}");
-        let e = err_of(&format!(
-            r#"{{"type":"Feature","geometry":{poly},"properties":{{"id":"a","layer":"lane_line","class":"solid_line"}}}}"#
-        ));
-        assert!(e.contains("must be a LineString"), "{e}");
-        let e = err_of(&format!(
-            r#"{{"type":"Feature","geometry":{poly},"properties":{{"id":"a","layer":"roads","class":"solid_line"}}}}"#
-        ));
-        assert!(e.contains("unknown layer \"roads\""), "{e}");
-        let e = err_of(&format!(
-            r#"{{"type":"Feature","geometry":{poly},"properties":{{"layer":"marking","class":"solid_line"}}}}"#
-        ));
-        assert!(e.contains("missing property \"id\""), "{e}");
-        let e = err_of(&format!(
-            r#"{{"type":"Feature","geometry":{poly},"properties":{{"id":"a","layer":"marking","class":"solid_line","confidence":3}}}}"#
-        ));
-        assert!(e.contains("outside 0..1"), "{e}");
-        let e = err_of(
-            r#"{"type":"Feature","geometry":{"type":"Polygon","coordinates":[[[0,0],[9,0],[9,9],[0,0]],[[1,1],[2,1],[2,2],[1,1]]]},"properties":{"id":"a","layer":"marking","class":"diamond"}}"#,
-        );
-        assert!(e.contains("1 holes"), "{e}");
-        let e = err_of(
-            r#"{"type":"Feature","geometry":{"type":"Polygon","coordinates":[[[0,0],[1,0],[0,0]]]},"properties":{"id":"a","layer":"marking","class":"diamond"}}"#,
-        );
-        assert!(e.contains("fewer than 3"), "{e}");
-        let e = err_of(&format!(
-            r#"{{"type":"Feature","geometry":{poly},"properties":{{"id":"a","layer":"marking","class":"diamond"}}}},
-               {{"type":"Feature","geometry":{poly},"properties":{{"id":"a","layer":"marking","class":"diamond"}}}}"#
-        ));
+        let cases = [
+            (
+                SQUARE,
+                r#""id":"a","class":"dashed_line""#,
+                "missing property \"layer\"",
+            ),
+            (
+                SQUARE,
+                r#""id":"a","layer":"marking","class":"zigzag""#,
+                "unknown marking class \"zigzag\"",
+            ),
+            (
+                SQUARE,
+                r#""id":"a","layer":"lane_line","class":"solid_line""#,
+                "must be a LineString",
+            ),
+            (
+                SQUARE,
+                r#""id":"a","layer":"roads","class":"solid_line""#,
+                "unknown layer \"roads\"",
+            ),
+            (
+                SQUARE,
+                r#""layer":"marking","class":"solid_line""#,
+                "missing property \"id\"",
+            ),
+            (
+                SQUARE,
+                r#""id":"a","layer":"marking""#,
+                "missing property \"class\"",
+            ),
+            (
+                SQUARE,
+                r#""id":"a","layer":"marking","class":"diamond","confidence":3"#,
+                "outside 0..1",
+            ),
+            (
+                SQUARE,
+                r#""id":"a","layer":"marking","class":"diamond","point_count":-1"#,
+                "point_count",
+            ),
+            (
+                r#"{"type":"Polygon","coordinates":[[[0,0],[9,0],[9,9],[0,0]],[[1,1],[2,1],[2,2],[1,1]]]}"#,
+                r#""id":"a","layer":"marking","class":"diamond""#,
+                "1 holes",
+            ),
+            (
+                r#"{"type":"Polygon","coordinates":[[[0,0],[1,0],[0,0]]]}"#,
+                r#""id":"a","layer":"marking","class":"diamond""#,
+                "fewer than 3",
+            ),
+            (
+                r#"{"type":"LineString","coordinates":[[0,0],["a",1]]}"#,
+                r#""id":"a","layer":"lane_line","class":"solid_line""#,
+                "non-number",
+            ),
+            (
+                "null",
+                r#""id":"a","layer":"marking","class":"diamond""#,
+                "missing \"geometry\"",
+            ),
+        ];
+        for (geometry, props, want) in cases {
+            let e = feature_err(geometry, props);
+            assert!(e.contains("feature 0") && e.contains(want), "{want}: {e}");
+        }
+        let props = r#"{"id":"a","layer":"marking","class":"diamond"}"#;
+        let one = format!(r#"{{"type":"Feature","geometry":{SQUARE},"properties":{props}}}"#);
+        let e = err_of(&format!("{one},{one}"));
         assert!(
             e.contains("feature 1") && e.contains("duplicate marking id"),
             "{e}"
         );
         let e = from_geojson_str(r#"{"type":"Feature"}"#).unwrap_err();
         assert!(e.contains("expected a FeatureCollection"), "{e}");
-        let e = from_geojson_str(r#"{"type":"FeatureCollection","features":[],"crs":{"type":"name","properties":{"name":"bogus"}}}"#)
-            .unwrap_err();
+        let bogus = r#"{"type":"name","properties":{"name":"bogus"}}"#;
+        let e = from_geojson_str(&format!(
+            r#"{{"type":"FeatureCollection","features":[],"crs":{bogus}}}"#
+        ))
+        .unwrap_err();
         assert!(e.contains("unsupported crs name"), "{e}");
     }
 

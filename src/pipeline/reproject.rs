@@ -20,6 +20,10 @@
 //! the test values were computed independently with pyproj 3.7 / PROJ 9.5.
 //!
 //! **Complexity.** O(1) per point, ≈ 1 M points/s on one core.
+//!
+//! [`Reprojector`]: crate::pipeline::reproject::Reprojector
+//! [`reproject_extraction`]: crate::pipeline::reproject::reproject_extraction
+//! [`Extraction`]: crate::pipeline::types::Extraction
 
 use super::types::{Crs, Extraction};
 use proj4rs::Proj;
