@@ -11,6 +11,8 @@ pub mod classify;
 pub mod cluster;
 /// Errors of the pipeline, split into fatal input errors and retryable ones.
 pub mod error;
+/// Planar geometry helpers (grid components, robust rectangles, smoothing).
+pub mod geom;
 /// GeoJSON output (and input, for truth files and evaluation).
 pub mod geojson;
 /// LAS/LAZ and trajectory readers, CRS detection.
@@ -19,6 +21,8 @@ pub mod io;
 pub mod params;
 /// Stage 1: pavement extraction guided by the trajectory.
 pub mod pavement;
+/// The smoothed trajectory frame (mileage, offset) used by classify and vectorize.
+pub mod refline;
 /// Stage 2: IDW intensity rasterisation with range/incidence normalisation.
 pub mod rasterize;
 /// Reprojection between the input CRS and WGS84.
