@@ -319,14 +319,19 @@ fn profile_split(pts: &[[f64; 2]], p: &Params) -> Option<Vec<Vec<usize>>> {
         .collect();
     // w₀ is already a robust full width (padded by half a point spacing each side); line
     // points beyond it are few and come back as tiny parts or slivers.
-    let tol = w0 / 2.0;
+    // Only points of wide slices (and their neighbours) can leave the line: the line's own
+    // stray points elsewhere must not chain a dash part along it.
+    let near_wide: Vec<bool> = (0..ns)
+        .map(|k| wide[k] || (k > 0 && wide[k - 1]) || (k + 1 < ns && wide[k + 1]))
+        .collect();
+    let tol = w0 / 2.0 + 0.01;
     let (mut line, mut rest) = (Vec::new(), Vec::new());
     for (i, q) in uv.iter().enumerate() {
         let f = ((q[0] - umin) / DS - 0.5).clamp(0.0, (ns - 1) as f64);
         let k = (f.floor() as usize).min(ns - 1);
         let k1 = (k + 1).min(ns - 1);
         let c = centre[k] + (f - k as f64) * (centre[k1] - centre[k]);
-        if (q[1] - c).abs() <= tol {
+        if (q[1] - c).abs() <= tol || !near_wide[slice_of(q[0])] {
             line.push(i);
         } else {
             rest.push(i);
@@ -335,14 +340,17 @@ fn profile_split(pts: &[[f64; 2]], p: &Params) -> Option<Vec<Vec<usize>>> {
     let (parts, tiny) = rest_components(pts, &rest, p);
     line.extend(tiny);
     let mut out = Vec::new();
+    // Points per m² of the line, to tell a dash from a sparse scatter of stray points.
+    let density = pts.len() as f64 / (len * w0).max(1e-6);
     for part in parts {
         let bar = filled_bar(&part.iter().map(|&k| pts[k]).collect::<Vec<_>>());
-        // A dash: parallel, at least 1 m long and as wide as a painted line (not a sliver
-        // shaved off the line's own edge).
+        // A dash: parallel, at least 1 m long, as wide as a painted line (not a sliver
+        // shaved off the line's own edge) and about as dense as the line.
         let parallel = bar.is_some_and(|b| {
             geom::acute_angle_deg(b.pca.axis, pca.axis) <= 12.0
                 && b.length() >= 1.0
                 && b.width() >= (0.4 * w0).max(0.06)
+                && part.len() as f64 >= 0.3 * density * b.length() * b.width()
         });
         if parallel {
             out.push(part);

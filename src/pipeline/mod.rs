@@ -17,6 +17,10 @@ pub mod geom;
 pub mod geojson;
 /// LAS/LAZ and trajectory readers, CRS detection.
 pub mod io;
+/// Lane-line growth (part of stage 6).
+pub mod lanes;
+/// Marking outlines: rectangles, buffered centrelines, alpha shapes (part of stage 6).
+pub mod outline;
 /// Every tunable parameter with its documented default, validated before any point is read.
 pub mod params;
 /// Stage 1: pavement extraction guided by the trajectory.
