@@ -734,8 +734,10 @@ mod tests {
         let c = run(&cloud(&pts), &Params::default());
         assert_eq!(c.len(), 2, "{:?}", sizes(&c));
         let solid = c.iter().max_by_key(|c| c.indices.len()).unwrap();
+        // Touching: only the dash's boundary row (1 of 6) is ambiguous.
         let wrong = solid.indices.iter().filter(|&&i| i >= nsolid).count();
-        assert!(wrong * 50 < solid.indices.len(), "dash points left in the solid: {wrong}");
+        let ndash = pts.len() - nsolid;
+        assert!(wrong * 5 < ndash, "dash points left in the solid: {wrong} of {ndash}");
         assert!(c.iter().all(|c| c.split));
     }
 
