@@ -15,7 +15,7 @@ use super::{AppState, ErrorBody};
 use crate::jobs::clock::rfc3339;
 use crate::jobs::queue::{CancelOutcome, JobRecord, JobStatus, NewJob};
 use crate::pipeline::Extraction;
-use crate::pipeline::geojson::{self, CrsMode};
+use crate::pipeline::geojson::{self, CrsMode, GeoJsonError};
 use crate::pipeline::params::Params;
 use axum::Json;
 use axum::extract::rejection::QueryRejection;
@@ -512,12 +512,12 @@ pub async fn get_result(
 
 /// GeoJSON in the requested coordinates.
 fn render(extraction: &Extraction, mode: CrsMode) -> Result<serde_json::Value, ApiError> {
-    match mode {
-        CrsMode::Native => Ok(geojson::to_native(extraction)),
-        CrsMode::Wgs84 => Err(ApiError::CrsUnavailable(
-            "WGS84 output is not available in this build; use crs=native".into(),
+    geojson::to_geojson(extraction, mode).map_err(|e| match e {
+        GeoJsonError::Reproject(m) => ApiError::CrsUnavailable(format!(
+            "the result cannot be reprojected to WGS84 ({m}); use crs=native"
         )),
-    }
+        other => ApiError::Internal(format!("rendering the result: {other}")),
+    })
 }
 
 pub(crate) async fn job_view(state: &AppState, r: JobRecord) -> Result<Job, ApiError> {

@@ -4,7 +4,7 @@
 //! whole in memory) while its SHA-256 and size are computed; the size limit is enforced on
 //! the stream (and up front from `Content-Length`). The kind is recognised from the first bytes
 //! ([`io::sniff`]), whatever the Content-Type; then LAS/LAZ headers are checked against the file
-//! size ([`io::inspect_points`]) and trajectory tables parsed ([`io::read_trajectory`]) on the
+//! size ([`io::inspect_points`]) and trajectory tables parsed ([`io::inspect_trajectory`]) on the
 //! blocking pool. Only a valid file is moved to its final, server-chosen name
 //! (`uploads/<uuid>.<ext>`) and recorded; on any failure — including the client hanging up —
 //! the partial file is removed. The client's `filename` is kept for display only.
@@ -29,7 +29,7 @@ use tokio::io::{AsyncWriteExt, BufWriter};
 use utoipa::{IntoParams, ToSchema};
 
 /// Bytes kept from the start of an upload for recognising its kind.
-const HEAD_BYTES: usize = 4096;
+const HEAD_BYTES: usize = io::SNIFF_BYTES;
 
 /// What the uploaded file is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
@@ -121,12 +121,20 @@ pub struct CrsInfo {
 /// Summary of a trajectory table.
 #[derive(Clone, Debug, Serialize, Deserialize, ToSchema)]
 pub struct TrajectoryInfo {
-    /// Poses (data rows) read.
+    /// Data rows in the table.
     pub rows: u64,
+    /// Poses kept after sorting and merging repeated positions.
+    pub poses: u64,
+    /// Column names as found (lower case).
+    pub columns: Vec<String>,
+    /// `comma`, `semicolon`, `tab` or `whitespace`.
+    pub delimiter: String,
     /// First and last time stamp.
     pub time_range: [f64; 2],
-    /// Driven length along the trajectory, metres.
+    /// Length of the track, metres.
     pub length_m: f64,
+    pub has_z: bool,
+    pub has_heading: bool,
 }
 
 #[derive(Debug, Deserialize, IntoParams)]
@@ -347,16 +355,20 @@ async fn validate(kind: UploadKind, path: PathBuf, label: &str) -> Result<Upload
                 has_gps_time: s.has_gps_time,
             }))
         } else {
-            let t = io::read_trajectory(&path)?;
-            let poses = t.poses();
-            let time_range = match (poses.first(), poses.last()) {
-                (Some(a), Some(b)) => [a.time, b.time],
-                _ => [0.0, 0.0],
-            };
+            let t = io::inspect_trajectory(&path)?;
+            let delimiter = serde_json::to_value(t.delimiter)
+                .ok()
+                .and_then(|v| v.as_str().map(str::to_string))
+                .unwrap_or_default();
             Ok(UploadSummary::Trajectory(TrajectoryInfo {
-                rows: poses.len() as u64,
-                time_range,
-                length_m: t.length_m(),
+                rows: t.row_count as u64,
+                poses: t.pose_count as u64,
+                columns: t.columns,
+                delimiter,
+                time_range: t.time_range,
+                length_m: t.length_m,
+                has_z: t.has_z,
+                has_heading: t.has_heading,
             }))
         }
     })
@@ -408,8 +420,13 @@ mod tests {
     fn summaries_round_trip_through_the_database_json() {
         let t = UploadSummary::Trajectory(TrajectoryInfo {
             rows: 3,
+            poses: 3,
+            columns: vec!["time".into(), "x".into(), "y".into()],
+            delimiter: "comma".into(),
             time_range: [1.0, 2.0],
             length_m: 10.0,
+            has_z: false,
+            has_heading: false,
         });
         let back: UploadSummary = serde_json::from_str(&serde_json::to_string(&t).unwrap()).unwrap();
         assert!(matches!(
