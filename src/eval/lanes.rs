@@ -183,10 +183,7 @@ mod tests {
             class,
             line: pts.to_vec(),
             confidence: 1.0,
-            length_m: pts
-                .windows(2)
-                .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
-                .sum(),
+            length_m: pts.windows(2).map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1])).sum(),
             marking_ids: vec![],
         }
     }
@@ -194,25 +191,16 @@ mod tests {
 
     #[test]
     fn self_is_perfect_and_empty_is_none() {
-        let t = vec![
-            line("a", S, &[[0.0, 0.0], [30.0, 0.3], [60.0, 2.0]]),
-            line("b", D, &[[0.0, 3.5], [60.0, 3.5]]),
-        ];
+        let t = vec![line("a", S, &[[0.0, 0.0], [30.0, 0.3], [60.0, 2.0]]), line("b", D, &[[0.0, 3.5], [60.0, 3.5]])];
         let s = lane_scores(&t, &t, 0.15, 0.1);
-        assert_eq!(
-            (s.completeness, s.correctness, s.f_score),
-            (Some(1.0), Some(1.0), Some(1.0))
-        );
+        assert_eq!((s.completeness, s.correctness, s.f_score), (Some(1.0), Some(1.0), Some(1.0)));
         assert!(s.rmse_m.unwrap() < 1e-12);
         assert_eq!((s.fragmentation_mean, s.fragmentation_max), (Some(1.0), Some(1)));
         assert_eq!(s.class_agreement, Some(1.0));
         let e = lane_scores(&[], &[], 0.15, 0.1);
         assert_eq!((e.completeness, e.correctness, e.rmse_m), (None, None, None));
         let miss = lane_scores(&t, &[], 0.15, 0.1);
-        assert_eq!(
-            (miss.completeness, miss.f_score, miss.unmatched_truth_lines),
-            (Some(0.0), Some(0.0), 2)
-        );
+        assert_eq!((miss.completeness, miss.f_score, miss.unmatched_truth_lines), (Some(0.0), Some(0.0), 2));
     }
 
     #[test]

@@ -38,9 +38,7 @@ pub mod pixel;
 pub mod raster;
 
 use crate::pipeline::geojson::read_geojson;
-use crate::pipeline::reproject::{
-    EPSG_WGS84, Reprojector, crs_label, map_coords, reproject_extraction, utm_epsg_for,
-};
+use crate::pipeline::reproject::{EPSG_WGS84, Reprojector, crs_label, map_coords, reproject_extraction, utm_epsg_for};
 use crate::pipeline::types::{Crs, Extraction};
 use serde::{Deserialize, Serialize, de::DeserializeOwned};
 use std::fmt::Write as _;
@@ -88,10 +86,7 @@ impl EvalOptions {
         pos(self.lane_tol_m, "lane_tol_m", 10.0)?;
         pos(self.sample_m, "sample_m", 10.0)?;
         if !(self.solid_tol_m.is_finite() && (0.0..=10.0).contains(&self.solid_tol_m)) {
-            return Err(format!(
-                "solid_tol_m must be in [0, 10], got {}",
-                self.solid_tol_m
-            ));
+            return Err(format!("solid_tol_m must be in [0, 10], got {}", self.solid_tol_m));
         }
         Ok(())
     }
@@ -328,10 +323,7 @@ fn centroid(ex: &Extraction) -> Option<(f64, f64)> {
 }
 
 /// Bring both sides into one metric CRS; returns them, the working CRS label and notes.
-fn align(
-    truth: &Extraction,
-    result: &Extraction,
-) -> Result<(Extraction, Extraction, String, Vec<String>), String> {
+fn align(truth: &Extraction, result: &Extraction) -> Result<(Extraction, Extraction, String, Vec<String>), String> {
     let mut notes = Vec::new();
     let to = |ex: &Extraction, crs: &Crs, who: &str, notes: &mut Vec<String>| {
         let out = reproject_extraction(ex, crs).map_err(|e| format!("{who}: {e}"))?;
@@ -362,20 +354,13 @@ fn align(
                     crs_label(Some(c))
                 ));
             }
-            notes.push(format!(
-                "{unknown} CRS unknown: assumed to be {} like the {known}",
-                crs_label(Some(c))
-            ));
+            notes.push(format!("{unknown} CRS unknown: assumed to be {} like the {known}", crs_label(Some(c))));
             Ok((truth.clone(), result.clone(), crs_label(Some(c)), notes))
         }
         (Some(a), Some(b)) => {
             let (ga, gb) = (is_geographic(a), is_geographic(b));
             if !ga {
-                let r = if same_crs(a, b) {
-                    result.clone()
-                } else {
-                    to(result, a, "result", &mut notes)?
-                };
+                let r = if same_crs(a, b) { result.clone() } else { to(result, a, "result", &mut notes)? };
                 Ok((truth.clone(), r, crs_label(Some(a)), notes))
             } else if !gb {
                 let t = to(truth, b, "truth", &mut notes)?;
@@ -396,22 +381,12 @@ fn align(
 /// Both sides relative to one integer-metre origin (lower-left of everything).
 fn localise(truth: &Extraction, result: &Extraction) -> (Extraction, Extraction) {
     let all = [truth, result];
-    let pts = all.iter().flat_map(|ex| {
-        ex.markings
-            .iter()
-            .flat_map(|m| &m.outline)
-            .chain(ex.lane_lines.iter().flat_map(|l| &l.line))
-    });
-    let (mx, my) = pts.fold((f64::INFINITY, f64::INFINITY), |(x, y), p| {
-        (x.min(p[0]), y.min(p[1]))
-    });
-    let (ox, oy) = if mx.is_finite() {
-        (mx.floor(), my.floor())
-    } else {
-        (0.0, 0.0)
-    };
-    let shift =
-        |ex: &Extraction| map_coords(ex, |x, y| Ok((x - ox, y - oy))).expect("translation cannot fail");
+    let pts = all
+        .iter()
+        .flat_map(|ex| ex.markings.iter().flat_map(|m| &m.outline).chain(ex.lane_lines.iter().flat_map(|l| &l.line)));
+    let (mx, my) = pts.fold((f64::INFINITY, f64::INFINITY), |(x, y), p| (x.min(p[0]), y.min(p[1])));
+    let (ox, oy) = if mx.is_finite() { (mx.floor(), my.floor()) } else { (0.0, 0.0) };
+    let shift = |ex: &Extraction| map_coords(ex, |x, y| Ok((x - ox, y - oy))).expect("translation cannot fail");
     (shift(truth), shift(result))
 }
 
@@ -511,11 +486,7 @@ impl Report {
             let _ = writeln!(s, "note: {n}");
         }
         let p = &self.pixel;
-        let _ = writeln!(
-            s,
-            "\n{:<34}{:>14}{:>13}{:>10}",
-            "", "completeness", "correctness", "F-score"
-        );
+        let _ = writeln!(s, "\n{:<34}{:>14}{:>13}{:>10}", "", "completeness", "correctness", "F-score");
         let _ = writeln!(
             s,
             "{:<34}{:>14}{:>13}{:>10}",
@@ -669,12 +640,7 @@ mod tests {
 
     #[test]
     fn empty_against_empty_is_all_undefined() {
-        let r = evaluate(
-            &Extraction::default(),
-            &Extraction::default(),
-            &EvalOptions::default(),
-        )
-        .unwrap();
+        let r = evaluate(&Extraction::default(), &Extraction::default(), &EvalOptions::default()).unwrap();
         assert_eq!(r.pixel.f_score, None);
         assert_eq!(r.lanes.completeness, None);
         assert_eq!(r.objects.macro_f1, None);

@@ -131,10 +131,7 @@ mod tests {
         assert_eq!((s.completeness, s.correctness, s.f_score), (None, None, None));
         let one = vec![bar(MarkingClass::DashedLine, 0.0, 0.0, 0.15, 6.0)];
         let s = pixel_scores(&one, &none, 0.05);
-        assert_eq!(
-            (s.completeness, s.correctness, s.f_score),
-            (Some(0.0), None, Some(0.0))
-        );
+        assert_eq!((s.completeness, s.correctness, s.f_score), (Some(0.0), None, Some(0.0)));
     }
 
     #[test]
@@ -160,11 +157,7 @@ mod tests {
         ];
         let out = solid_line(&t, &r, 0.05, 0.15);
         // 60 m plus the 0.15 m tolerance past the end of the last piece.
-        assert!(
-            (out.scores.recall.unwrap() - 0.6015).abs() < 1e-3,
-            "{:?}",
-            out.scores.recall
-        );
+        assert!((out.scores.recall.unwrap() - 0.6015).abs() < 1e-3, "{:?}", out.scores.recall);
         assert!((out.scores.precision.unwrap() - 0.75).abs() < 1e-3);
         assert!((out.scores.detected_length_m.unwrap() - 60.15).abs() < 0.1);
         assert_eq!(out.truth_covered, [true]);

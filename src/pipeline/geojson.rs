@@ -75,7 +75,10 @@ pub enum GeoJsonError {
     #[error("feature {0} has a non-finite coordinate")]
     NonFinite(String),
     #[error("cannot write {path}: {source}")]
-    Write { path: PathBuf, source: std::io::Error },
+    Write {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     /// Unreadable file or not the contract's schema.
     #[error("{path}: {message}")]
     Read { path: PathBuf, message: String },
@@ -283,9 +286,7 @@ fn prop_id(v: &Value, at: &At) -> Result<String, String> {
     match v {
         Value::String(s) if !s.is_empty() => Ok(s.clone()),
         Value::Number(n) if n.is_u64() || n.is_i64() => Ok(n.to_string()),
-        _ => Err(format!(
-            "{at}: property \"id\" must be a non-empty string or an integer, found {v}"
-        )),
+        _ => Err(format!("{at}: property \"id\" must be a non-empty string or an integer, found {v}")),
     }
 }
 
@@ -341,9 +342,7 @@ fn parse_feature(i: usize, f: &Value) -> Result<Parsed, String> {
                 )
             })?;
             if gtype != "Polygon" {
-                return Err(format!(
-                    "{at} (id {id}): a marking must be a Polygon, found \"{gtype}\""
-                ));
+                return Err(format!("{at} (id {id}): a marking must be a Polygon, found \"{gtype}\""));
             }
             let rings = coords
                 .as_array()
@@ -364,18 +363,17 @@ fn parse_feature(i: usize, f: &Value) -> Result<Parsed, String> {
             }
             outline.dedup();
             if outline.len() < 3 {
-                return Err(format!(
-                    "{at} (id {id}): the outline has fewer than 3 distinct vertices"
-                ));
+                return Err(format!("{at} (id {id}): the outline has fewer than 3 distinct vertices"));
             }
             let length = prop_f64(props, "length_m", &at)?;
             let width = prop_f64(props, "width_m", &at)?;
             let heading = prop_f64(props, "heading_deg", &at)?;
             let point_count = match props.get("point_count") {
                 None | Some(Value::Null) => 0,
-                Some(v) => v.as_u64().ok_or_else(|| {
-                    format!("{at} (id {id}): \"point_count\" must be a non-negative integer")
-                })? as usize,
+                Some(v) => v
+                    .as_u64()
+                    .ok_or_else(|| format!("{at} (id {id}): \"point_count\" must be a non-negative integer"))?
+                    as usize,
             };
             let given = [length.is_some(), width.is_some(), heading.is_some()];
             Ok(Parsed::Marking(
@@ -406,18 +404,14 @@ fn parse_feature(i: usize, f: &Value) -> Result<Parsed, String> {
             let mut line = positions(coords, &at, "LineString coordinates")?;
             line.dedup();
             if line.len() < 2 {
-                return Err(format!(
-                    "{at} (id {id}): the LineString has fewer than 2 distinct positions"
-                ));
+                return Err(format!("{at} (id {id}): the LineString has fewer than 2 distinct positions"));
             }
             let length = prop_f64(props, "length_m", &at)?;
             let marking_ids = match props.get("marking_ids") {
                 None | Some(Value::Null) => Vec::new(),
                 Some(Value::Array(a)) => a.iter().map(|v| prop_id(v, &at)).collect::<Result<_, _>>()?,
                 Some(v) => {
-                    return Err(format!(
-                        "{at} (id {id}): \"marking_ids\" must be an array, found {v}"
-                    ));
+                    return Err(format!("{at} (id {id}): \"marking_ids\" must be an array, found {v}"));
                 }
             };
             Ok(Parsed::Lane(
@@ -685,12 +679,7 @@ mod tests {
         assert_eq!(from_geojson(&v).unwrap().crs, Some(crs.clone()));
         // And the WKT is enough for lon/lat output.
         let w = to_geojson(&sample(Some(crs)), CrsMode::Wgs84).unwrap();
-        assert!(
-            w["features"][0]["geometry"]["coordinates"][0][0][0]
-                .as_f64()
-                .unwrap()
-                < 180.0
-        );
+        assert!(w["features"][0]["geometry"]["coordinates"][0][0][0].as_f64().unwrap() < 180.0);
     }
 
     #[test]
@@ -723,10 +712,7 @@ mod tests {
     }
 
     fn err_of(features: &str) -> String {
-        from_geojson_str(&format!(
-            r#"{{"type":"FeatureCollection","features":[{features}]}}"#
-        ))
-        .unwrap_err()
+        from_geojson_str(&format!(r#"{{"type":"FeatureCollection","features":[{features}]}}"#)).unwrap_err()
     }
 
     #[test]
@@ -735,10 +721,7 @@ mod tests {
         let e = err_of(&format!(
             r#"{{"type":"Feature","geometry":{poly},"properties":{{"id":"a","class":"dashed_line"}}}}"#
         ));
-        assert!(
-            e.contains("feature 0") && e.contains("missing property \"layer\""),
-            "{e}"
-        );
+        assert!(e.contains("feature 0") && e.contains("missing property \"layer\""), "{e}");
         let e = err_of(&format!(
             r#"{{"type":"Feature","geometry":{poly},"properties":{{"id":"a","layer":"marking","class":"zigzag"}}}}"#
         ));
@@ -771,10 +754,7 @@ mod tests {
             r#"{{"type":"Feature","geometry":{poly},"properties":{{"id":"a","layer":"marking","class":"diamond"}}}},
                {{"type":"Feature","geometry":{poly},"properties":{{"id":"a","layer":"marking","class":"diamond"}}}}"#
         ));
-        assert!(
-            e.contains("feature 1") && e.contains("duplicate marking id"),
-            "{e}"
-        );
+        assert!(e.contains("feature 1") && e.contains("duplicate marking id"), "{e}");
         let e = from_geojson_str(r#"{"type":"Feature"}"#).unwrap_err();
         assert!(e.contains("expected a FeatureCollection"), "{e}");
         let e = from_geojson_str(r#"{"type":"FeatureCollection","features":[],"crs":{"type":"name","properties":{"name":"bogus"}}}"#)
@@ -794,9 +774,7 @@ mod tests {
         std::fs::write(&bad, "{ nope").unwrap();
         let e = read_geojson(&bad).unwrap_err().to_string();
         assert!(e.contains("bad.geojson") && e.contains("not valid JSON"), "{e}");
-        let e = read_geojson(&dir.path().join("missing.geojson"))
-            .unwrap_err()
-            .to_string();
+        let e = read_geojson(&dir.path().join("missing.geojson")).unwrap_err().to_string();
         assert!(e.contains("missing.geojson") && e.contains("cannot read"), "{e}");
     }
 

@@ -73,11 +73,7 @@ fn proj_string(crs: &Crs) -> Result<String, String> {
     if why.is_empty() {
         why.push("it has neither an EPSG code nor a WKT".into());
     }
-    Err(format!(
-        "cannot reproject from {}: {}",
-        crs_label(Some(crs)),
-        why.join("; ")
-    ))
+    Err(format!("cannot reproject from {}: {}", crs_label(Some(crs)), why.join("; ")))
 }
 
 impl Reprojector {
@@ -144,10 +140,7 @@ impl Reprojector {
         if out.0.is_finite() && out.1.is_finite() {
             Ok(out)
         } else {
-            Err(format!(
-                "lon/lat ({lon}, {lat}) has no position in {}",
-                self.label
-            ))
+            Err(format!("lon/lat ({lon}, {lat}) has no position in {}", self.label))
         }
     }
 }
@@ -184,12 +177,10 @@ pub fn map_coords(
 /// Properties (lengths, headings) are kept as they are: they are metric values of the
 /// painted objects, not of the coordinates. Errors when `ex.crs` is unknown.
 pub fn reproject_extraction(ex: &Extraction, to: &Crs) -> Result<Extraction, String> {
-    let from = ex.crs.as_ref().ok_or_else(|| {
-        format!(
-            "cannot reproject to {}: the source CRS is unknown",
-            crs_label(Some(to))
-        )
-    })?;
+    let from = ex
+        .crs
+        .as_ref()
+        .ok_or_else(|| format!("cannot reproject to {}: the source CRS is unknown", crs_label(Some(to))))?;
     if from == to || (from.epsg.is_some() && from.epsg == to.epsg) {
         return Ok(ex.clone());
     }
