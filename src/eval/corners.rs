@@ -22,8 +22,11 @@ use crate::pipeline::types::{Marking, MarkingClass};
 use geo::MinimumRotatedRect;
 
 /// Classes whose outline is a rectangle.
-pub const RECTANGLE_CLASSES: [MarkingClass; 3] =
-    [MarkingClass::DashedLine, MarkingClass::StopLine, MarkingClass::Crosswalk];
+pub const RECTANGLE_CLASSES: [MarkingClass; 3] = [
+    MarkingClass::DashedLine,
+    MarkingClass::StopLine,
+    MarkingClass::Crosswalk,
+];
 
 /// The four corners of the minimum rotated rectangle of an outline.
 pub fn rectangle_corners(outline: &[[f64; 2]]) -> Option<[[f64; 2]; 4]> {
@@ -105,7 +108,10 @@ mod tests {
 
     #[test]
     fn shifted_and_reordered_rectangle() {
-        let t = vec![mk(MarkingClass::StopLine, &[[0.0, 0.0], [4.0, 0.0], [4.0, 0.4], [0.0, 0.4]])];
+        let t = vec![mk(
+            MarkingClass::StopLine,
+            &[[0.0, 0.0], [4.0, 0.0], [4.0, 0.4], [0.0, 0.4]],
+        )];
         // Same rectangle 3 cm east, listed clockwise from another corner, with an extra
         // vertex on one side (the MRR removes it).
         let r = vec![mk(

@@ -13,8 +13,10 @@
 //!   length / result length; F = their harmonic mean;
 //! - RMSE = √(Σ w·d² / Σ w) over matched truth samples (d = distance to the nearest result);
 //! - fragmentation of a truth line = number of result lines that are the nearest match over
-//!   at least min(1 m, 20 % of the truth line) of it; mean and max over truth lines that are
-//!   matched at all (unmatched ones are counted separately);
+//!   at least min(1 m, 20 % of the truth line) of it *and* belong to it (a result line
+//!   belongs to the truth line it lies along for most of its matched length, so converging
+//!   lines at a gore do not count as pieces of each other); mean and max over truth lines
+//!   that are matched at all (unmatched ones are counted separately);
 //! - class agreement = matched truth length whose nearest result line has the same class /
 //!   matched truth length.
 //!
@@ -138,17 +140,38 @@ pub fn lane_scores(truth: &[LaneLine], result: &[LaneLine], tol_m: f64, sample_m
             *pieces[s.line].entry(r).or_default() += s.w;
         }
     }
-    let r_matched: f64 = rs
+    // Each result line belongs to the truth line it lies along for most of its matched length;
+    // where truth lines converge (a gore, a chain of lines sharing an end point) the nearest
+    // line switches over a few metres, and that must not count as a fragment.
+    let mut r_matched = 0.0;
+    let mut along: Vec<HashMap<usize, f64>> = vec![HashMap::new(); result.len()];
+    for s in &rs {
+        if let Some((_, t)) = t_index.nearest(s.p, tol_m) {
+            r_matched += s.w;
+            *along[s.line].entry(t).or_default() += s.w;
+        }
+    }
+    let owner: Vec<Option<usize>> = along
         .iter()
-        .filter(|s| t_index.nearest(s.p, tol_m).is_some())
-        .map(|s| s.w)
-        .sum();
+        .map(|m| {
+            m.iter()
+                .max_by(|a, b| a.1.total_cmp(b.1).then(b.0.cmp(a.0)))
+                .map(|(&t, _)| t)
+        })
+        .collect();
+    let mut t_line_len = vec![0.0; truth.len()];
+    for s in &ts {
+        t_line_len[s.line] += s.w;
+    }
     let counts: Vec<usize> = pieces
         .iter()
-        .zip(truth)
-        .map(|(m, t)| {
-            let min_m = (0.2 * t.length_m.max(0.0)).min(1.0);
-            m.values().filter(|&&len| len >= min_m).count()
+        .zip(&t_line_len)
+        .enumerate()
+        .map(|(k, (m, &len_m))| {
+            let min_m = (0.2 * len_m).min(1.0);
+            m.iter()
+                .filter(|&(&r, &len)| len >= min_m && owner[r] == Some(k))
+                .count()
         })
         .collect();
     let found: Vec<usize> = counts.iter().copied().filter(|&c| c > 0).collect();
@@ -183,7 +206,10 @@ mod tests {
             class,
             line: pts.to_vec(),
             confidence: 1.0,
-            length_m: pts.windows(2).map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1])).sum(),
+            length_m: pts
+                .windows(2)
+                .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
+                .sum(),
             marking_ids: vec![],
         }
     }
@@ -191,16 +217,25 @@ mod tests {
 
     #[test]
     fn self_is_perfect_and_empty_is_none() {
-        let t = vec![line("a", S, &[[0.0, 0.0], [30.0, 0.3], [60.0, 2.0]]), line("b", D, &[[0.0, 3.5], [60.0, 3.5]])];
+        let t = vec![
+            line("a", S, &[[0.0, 0.0], [30.0, 0.3], [60.0, 2.0]]),
+            line("b", D, &[[0.0, 3.5], [60.0, 3.5]]),
+        ];
         let s = lane_scores(&t, &t, 0.15, 0.1);
-        assert_eq!((s.completeness, s.correctness, s.f_score), (Some(1.0), Some(1.0), Some(1.0)));
+        assert_eq!(
+            (s.completeness, s.correctness, s.f_score),
+            (Some(1.0), Some(1.0), Some(1.0))
+        );
         assert!(s.rmse_m.unwrap() < 1e-12);
         assert_eq!((s.fragmentation_mean, s.fragmentation_max), (Some(1.0), Some(1)));
         assert_eq!(s.class_agreement, Some(1.0));
         let e = lane_scores(&[], &[], 0.15, 0.1);
         assert_eq!((e.completeness, e.correctness, e.rmse_m), (None, None, None));
         let miss = lane_scores(&t, &[], 0.15, 0.1);
-        assert_eq!((miss.completeness, miss.f_score, miss.unmatched_truth_lines), (Some(0.0), Some(0.0), 2));
+        assert_eq!(
+            (miss.completeness, miss.f_score, miss.unmatched_truth_lines),
+            (Some(0.0), Some(0.0), 2)
+        );
     }
 
     #[test]
@@ -227,6 +262,32 @@ mod tests {
         assert!((s.completeness.unwrap() - 0.8).abs() < 0.003);
         assert_eq!(s.correctness, Some(1.0));
         assert!((s.class_agreement.unwrap() - 50.0 / 80.0).abs() < 0.003);
+    }
+
+    #[test]
+    fn diverging_lines_at_a_gore_are_not_fragments_of_each_other() {
+        // Two lines from one point, 2° apart: within 0.15 m of each other for ~4 m.
+        let a = 2f64.to_radians();
+        let t = vec![
+            line("a", S, &[[0.0, 0.0], [50.0, 0.0]]),
+            line("b", S, &[[0.0, 0.0], [50.0 * a.cos(), 50.0 * a.sin()]]),
+        ];
+        let r: Vec<LaneLine> = t
+            .iter()
+            .map(|l| {
+                line(
+                    &l.id,
+                    S,
+                    &l.line
+                        .iter()
+                        .map(|p| [p[0] + 0.05, p[1] - 0.03])
+                        .collect::<Vec<_>>(),
+                )
+            })
+            .collect();
+        let s = lane_scores(&t, &r, 0.15, 0.1);
+        assert_eq!(s.fragmentation_max, Some(1));
+        assert_eq!(s.completeness, Some(1.0));
     }
 
     #[test]

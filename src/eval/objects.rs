@@ -41,7 +41,10 @@ use std::collections::HashMap;
 const CELL_M: f64 = 5.0;
 
 fn polygon(ring: &[[f64; 2]]) -> Polygon<f64> {
-    Polygon::new(ring.iter().map(|p| geo::coord! {x: p[0], y: p[1]}).collect(), vec![])
+    Polygon::new(
+        ring.iter().map(|p| geo::coord! {x: p[0], y: p[1]}).collect(),
+        vec![],
+    )
 }
 
 /// Intersection over union of two outlines (rings not closed), in [0, 1].
@@ -230,8 +233,12 @@ pub fn score(
         per_class,
         confusion: Confusion { labels, counts },
         solid_line_fragments: [
-            (0..truth.len()).filter(|&i| t_match[i].is_none() && t_fragment[i]).count(),
-            (0..result.len()).filter(|&j| r_match[j].is_none() && r_fragment[j]).count(),
+            (0..truth.len())
+                .filter(|&i| t_match[i].is_none() && t_fragment[i])
+                .count(),
+            (0..result.len())
+                .filter(|&j| r_match[j].is_none() && r_fragment[j])
+                .count(),
         ],
     }
 }
@@ -305,7 +312,14 @@ mod tests {
         let s = score(&truth, &result, &pairs, &[false; 3], &[false; 3], NO_SOLID, 0.3);
         assert_eq!(
             s.confusion.labels,
-            ["dashed_line", "straight_arrow", "crosswalk", "diamond", "stop_line", "none"]
+            [
+                "dashed_line",
+                "straight_arrow",
+                "crosswalk",
+                "diamond",
+                "stop_line",
+                "none"
+            ]
         );
         let at = |t: &str, r: &str| {
             let l = &s.confusion.labels;

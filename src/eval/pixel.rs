@@ -24,6 +24,7 @@
 
 use super::raster::SpanSet;
 use super::{PixelScores, SolidLineScores, harmonic, ratio};
+use crate::pipeline::geojson::outline_dimensions;
 use crate::pipeline::types::{Marking, MarkingClass};
 
 /// Pixel-level completeness, correctness and F-score of all markings (any class).
@@ -82,10 +83,17 @@ pub fn solid_line(truth: &[Marking], result: &[Marking], pixel_m: f64, solid_tol
     let (td, rd) = (t.dilate(radius), r.dilate(radius));
     let recall = ratio(t.intersection_count(&rd) as f64, t.count() as f64);
     let precision = ratio(r.intersection_count(&td) as f64, r.count() as f64);
+    // The pieces' own `length_m`, or their rectangle's length when a file left it out.
     let length = |ms: &[Marking]| -> f64 {
         ms.iter()
             .filter(|m| m.class == MarkingClass::SolidLine)
-            .map(|m| m.length_m)
+            .map(|m| {
+                if m.length_m.is_finite() && m.length_m > 0.0 {
+                    m.length_m
+                } else {
+                    outline_dimensions(&m.outline).0
+                }
+            })
             .sum()
     };
     let truth_length_m = length(truth);
@@ -131,7 +139,10 @@ mod tests {
         assert_eq!((s.completeness, s.correctness, s.f_score), (None, None, None));
         let one = vec![bar(MarkingClass::DashedLine, 0.0, 0.0, 0.15, 6.0)];
         let s = pixel_scores(&one, &none, 0.05);
-        assert_eq!((s.completeness, s.correctness, s.f_score), (Some(0.0), None, Some(0.0)));
+        assert_eq!(
+            (s.completeness, s.correctness, s.f_score),
+            (Some(0.0), None, Some(0.0))
+        );
     }
 
     #[test]
@@ -157,7 +168,11 @@ mod tests {
         ];
         let out = solid_line(&t, &r, 0.05, 0.15);
         // 60 m plus the 0.15 m tolerance past the end of the last piece.
-        assert!((out.scores.recall.unwrap() - 0.6015).abs() < 1e-3, "{:?}", out.scores.recall);
+        assert!(
+            (out.scores.recall.unwrap() - 0.6015).abs() < 1e-3,
+            "{:?}",
+            out.scores.recall
+        );
         assert!((out.scores.precision.unwrap() - 0.75).abs() < 1e-3);
         assert!((out.scores.detected_length_m.unwrap() - 60.15).abs() < 0.1);
         assert_eq!(out.truth_covered, [true]);
@@ -167,10 +182,14 @@ mod tests {
         assert!((strict.scores.recall.unwrap() - 0.4).abs() < 1e-3);
     }
 
+    /// Up to 5 axis-aligned rectangles (x, y, w, h) in a 20 m square.
+    fn rects() -> impl Strategy<Value = Vec<(f64, f64, f64, f64)>> {
+        proptest::collection::vec((0.0f64..20.0, 0.0f64..20.0, 0.1f64..3.0, 0.1f64..3.0), 0..6)
+    }
+
     proptest! {
         #[test]
-        fn pixel_f_is_symmetric(a in proptest::collection::vec((0.0f64..20.0, 0.0f64..20.0, 0.1f64..3.0, 0.1f64..3.0), 0..6),
-                                b in proptest::collection::vec((0.0f64..20.0, 0.0f64..20.0, 0.1f64..3.0, 0.1f64..3.0), 0..6)) {
+        fn pixel_f_is_symmetric(a in rects(), b in rects()) {
             let ms = |v: &Vec<(f64, f64, f64, f64)>| -> Vec<Marking> {
                 v.iter().map(|&(x, y, w, h)| bar(MarkingClass::Unknown, x, y, w, h)).collect()
             };

@@ -27,6 +27,13 @@
 //! marking is one outline.
 //!
 //! **Complexity.** Linear in the number of vertices (plus one reprojection per vertex).
+//!
+//! [`to_geojson`]: crate::pipeline::geojson::to_geojson
+//! [`write_geojson`]: crate::pipeline::geojson::write_geojson
+//! [`from_geojson`]: crate::pipeline::geojson::from_geojson
+//! [`read_geojson`]: crate::pipeline::geojson::read_geojson
+//! [`CrsMode::Native`]: crate::pipeline::geojson::CrsMode::Native
+//! [`CrsMode::Wgs84`]: crate::pipeline::geojson::CrsMode::Wgs84
 
 use super::reproject::{EPSG_WGS84, Reprojector, crs_label};
 use super::types::{Crs, Extraction, LaneLine, LaneLineClass, Marking, MarkingClass};
@@ -46,6 +53,14 @@ pub enum CrsMode {
 }
 
 impl CrsMode {
+    /// The contract's default: `wgs84` whenever the input CRS is known, else `native`.
+    pub fn default_for(crs: Option<&Crs>) -> CrsMode {
+        match crs {
+            Some(c) if c.epsg.is_some() || c.wkt.is_some() => CrsMode::Wgs84,
+            _ => CrsMode::Native,
+        }
+    }
+
     pub fn as_str(self) -> &'static str {
         match self {
             CrsMode::Native => "native",
@@ -75,10 +90,7 @@ pub enum GeoJsonError {
     #[error("feature {0} has a non-finite coordinate")]
     NonFinite(String),
     #[error("cannot write {path}: {source}")]
-    Write {
-        path: PathBuf,
-        source: std::io::Error,
-    },
+    Write { path: PathBuf, source: std::io::Error },
     /// Unreadable file or not the contract's schema.
     #[error("{path}: {message}")]
     Read { path: PathBuf, message: String },
@@ -286,7 +298,9 @@ fn prop_id(v: &Value, at: &At) -> Result<String, String> {
     match v {
         Value::String(s) if !s.is_empty() => Ok(s.clone()),
         Value::Number(n) if n.is_u64() || n.is_i64() => Ok(n.to_string()),
-        _ => Err(format!("{at}: property \"id\" must be a non-empty string or an integer, found {v}")),
+        _ => Err(format!(
+            "{at}: property \"id\" must be a non-empty string or an integer, found {v}"
+        )),
     }
 }
 
@@ -342,7 +356,9 @@ fn parse_feature(i: usize, f: &Value) -> Result<Parsed, String> {
                 )
             })?;
             if gtype != "Polygon" {
-                return Err(format!("{at} (id {id}): a marking must be a Polygon, found \"{gtype}\""));
+                return Err(format!(
+                    "{at} (id {id}): a marking must be a Polygon, found \"{gtype}\""
+                ));
             }
             let rings = coords
                 .as_array()
@@ -363,17 +379,18 @@ fn parse_feature(i: usize, f: &Value) -> Result<Parsed, String> {
             }
             outline.dedup();
             if outline.len() < 3 {
-                return Err(format!("{at} (id {id}): the outline has fewer than 3 distinct vertices"));
+                return Err(format!(
+                    "{at} (id {id}): the outline has fewer than 3 distinct vertices"
+                ));
             }
             let length = prop_f64(props, "length_m", &at)?;
             let width = prop_f64(props, "width_m", &at)?;
             let heading = prop_f64(props, "heading_deg", &at)?;
             let point_count = match props.get("point_count") {
                 None | Some(Value::Null) => 0,
-                Some(v) => v
-                    .as_u64()
-                    .ok_or_else(|| format!("{at} (id {id}): \"point_count\" must be a non-negative integer"))?
-                    as usize,
+                Some(v) => v.as_u64().ok_or_else(|| {
+                    format!("{at} (id {id}): \"point_count\" must be a non-negative integer")
+                })? as usize,
             };
             let given = [length.is_some(), width.is_some(), heading.is_some()];
             Ok(Parsed::Marking(
@@ -404,14 +421,18 @@ fn parse_feature(i: usize, f: &Value) -> Result<Parsed, String> {
             let mut line = positions(coords, &at, "LineString coordinates")?;
             line.dedup();
             if line.len() < 2 {
-                return Err(format!("{at} (id {id}): the LineString has fewer than 2 distinct positions"));
+                return Err(format!(
+                    "{at} (id {id}): the LineString has fewer than 2 distinct positions"
+                ));
             }
             let length = prop_f64(props, "length_m", &at)?;
             let marking_ids = match props.get("marking_ids") {
                 None | Some(Value::Null) => Vec::new(),
                 Some(Value::Array(a)) => a.iter().map(|v| prop_id(v, &at)).collect::<Result<_, _>>()?,
                 Some(v) => {
-                    return Err(format!("{at} (id {id}): \"marking_ids\" must be an array, found {v}"));
+                    return Err(format!(
+                        "{at} (id {id}): \"marking_ids\" must be an array, found {v}"
+                    ));
                 }
             };
             Ok(Parsed::Lane(
@@ -679,7 +700,19 @@ mod tests {
         assert_eq!(from_geojson(&v).unwrap().crs, Some(crs.clone()));
         // And the WKT is enough for lon/lat output.
         let w = to_geojson(&sample(Some(crs)), CrsMode::Wgs84).unwrap();
-        assert!(w["features"][0]["geometry"]["coordinates"][0][0][0].as_f64().unwrap() < 180.0);
+        assert!(
+            w["features"][0]["geometry"]["coordinates"][0][0][0]
+                .as_f64()
+                .unwrap()
+                < 180.0
+        );
+    }
+
+    #[test]
+    fn default_mode_follows_the_contract() {
+        assert_eq!(CrsMode::default_for(Some(&Crs::epsg(32650))), CrsMode::Wgs84);
+        assert_eq!(CrsMode::default_for(Some(&Crs::default())), CrsMode::Native);
+        assert_eq!(CrsMode::default_for(None), CrsMode::Native);
     }
 
     #[test]
@@ -695,7 +728,8 @@ mod tests {
     #[test]
     fn lonlat_without_crs_member_is_wgs84_and_measures_are_derived() {
         let text = r#"{"type":"FeatureCollection","features":[
-          {"type":"Feature","geometry":{"type":"Polygon","coordinates":[[[114.0,30.0],[114.0,30.00005],[114.000002,30.00005],[114.000002,30.0],[114.0,30.0]]]},
+          {"type":"Feature","geometry":{"type":"Polygon","coordinates":[[[114.0,30.0],[114.0,30.00005],
+            [114.000002,30.00005],[114.000002,30.0],[114.0,30.0]]]},
            "properties":{"id":7,"layer":"marking","class":"stop_line"}},
           {"type":"Feature","geometry":{"type":"LineString","coordinates":[[114.0,30.0],[114.0,30.0001]]},
            "properties":{"id":"a","layer":"lane_line","class":"solid_line","confidence":0.5}}]}"#;
@@ -712,53 +746,103 @@ mod tests {
     }
 
     fn err_of(features: &str) -> String {
-        from_geojson_str(&format!(r#"{{"type":"FeatureCollection","features":[{features}]}}"#)).unwrap_err()
+        from_geojson_str(&format!(
+            r#"{{"type":"FeatureCollection","features":[{features}]}}"#
+        ))
+        .unwrap_err()
+    }
+
+    const SQUARE: &str = r#"{"type":"Polygon","coordinates":[[[0,0],[1,0],[1,1],[0,0]]]}"#;
+
+    /// One feature with the given geometry and properties.
+    fn feature_err(geometry: &str, props: &str) -> String {
+        err_of(&format!(
+            r#"{{"type":"Feature","geometry":{geometry},"properties":{{{props}}}}}"#
+        ))
     }
 
     #[test]
     fn schema_errors_are_clear() {
-        let poly = r#"{"type":"Polygon","coordinates":[[[0,0],[1,0],[1,1],[0,0]]]}"#;
-        let e = err_of(&format!(
-            r#"{{"type":"Feature","geometry":{poly},"properties":{{"id":"a","class":"dashed_line"}}}}"#
-        ));
-        assert!(e.contains("feature 0") && e.contains("missing property \"layer\""), "{e}");
-        let e = err_of(&format!(
-            r#"{{"type":"Feature","geometry":{poly},"properties":{{"id":"a","layer":"marking","class":"zigzag"}}}}"#
-        ));
-        assert!(e.contains("unknown marking class \"zigzag\""), "{e}");
-        let e = err_of(&format!(
-            r#"{{"type":"Feature","geometry":{poly},"properties":{{"id":"a","layer":"lane_line","class":"solid_line"}}}}"#
-        ));
-        assert!(e.contains("must be a LineString"), "{e}");
-        let e = err_of(&format!(
-            r#"{{"type":"Feature","geometry":{poly},"properties":{{"id":"a","layer":"roads","class":"solid_line"}}}}"#
-        ));
-        assert!(e.contains("unknown layer \"roads\""), "{e}");
-        let e = err_of(&format!(
-            r#"{{"type":"Feature","geometry":{poly},"properties":{{"layer":"marking","class":"solid_line"}}}}"#
-        ));
-        assert!(e.contains("missing property \"id\""), "{e}");
-        let e = err_of(&format!(
-            r#"{{"type":"Feature","geometry":{poly},"properties":{{"id":"a","layer":"marking","class":"solid_line","confidence":3}}}}"#
-        ));
-        assert!(e.contains("outside 0..1"), "{e}");
-        let e = err_of(
-            r#"{"type":"Feature","geometry":{"type":"Polygon","coordinates":[[[0,0],[9,0],[9,9],[0,0]],[[1,1],[2,1],[2,2],[1,1]]]},"properties":{"id":"a","layer":"marking","class":"diamond"}}"#,
+        let cases = [
+            (
+                SQUARE,
+                r#""id":"a","class":"dashed_line""#,
+                "missing property \"layer\"",
+            ),
+            (
+                SQUARE,
+                r#""id":"a","layer":"marking","class":"zigzag""#,
+                "unknown marking class \"zigzag\"",
+            ),
+            (
+                SQUARE,
+                r#""id":"a","layer":"lane_line","class":"solid_line""#,
+                "must be a LineString",
+            ),
+            (
+                SQUARE,
+                r#""id":"a","layer":"roads","class":"solid_line""#,
+                "unknown layer \"roads\"",
+            ),
+            (
+                SQUARE,
+                r#""layer":"marking","class":"solid_line""#,
+                "missing property \"id\"",
+            ),
+            (
+                SQUARE,
+                r#""id":"a","layer":"marking""#,
+                "missing property \"class\"",
+            ),
+            (
+                SQUARE,
+                r#""id":"a","layer":"marking","class":"diamond","confidence":3"#,
+                "outside 0..1",
+            ),
+            (
+                SQUARE,
+                r#""id":"a","layer":"marking","class":"diamond","point_count":-1"#,
+                "point_count",
+            ),
+            (
+                r#"{"type":"Polygon","coordinates":[[[0,0],[9,0],[9,9],[0,0]],[[1,1],[2,1],[2,2],[1,1]]]}"#,
+                r#""id":"a","layer":"marking","class":"diamond""#,
+                "1 holes",
+            ),
+            (
+                r#"{"type":"Polygon","coordinates":[[[0,0],[1,0],[0,0]]]}"#,
+                r#""id":"a","layer":"marking","class":"diamond""#,
+                "fewer than 3",
+            ),
+            (
+                r#"{"type":"LineString","coordinates":[[0,0],["a",1]]}"#,
+                r#""id":"a","layer":"lane_line","class":"solid_line""#,
+                "non-number",
+            ),
+            (
+                "null",
+                r#""id":"a","layer":"marking","class":"diamond""#,
+                "missing \"geometry\"",
+            ),
+        ];
+        for (geometry, props, want) in cases {
+            let e = feature_err(geometry, props);
+            assert!(e.contains("feature 0") && e.contains(want), "{want}: {e}");
+        }
+        let props = r#"{"id":"a","layer":"marking","class":"diamond"}"#;
+        let one = format!(r#"{{"type":"Feature","geometry":{SQUARE},"properties":{props}}}"#);
+        let e = err_of(&format!("{one},{one}"));
+        assert!(
+            e.contains("feature 1") && e.contains("duplicate marking id"),
+            "{e}"
         );
-        assert!(e.contains("1 holes"), "{e}");
-        let e = err_of(
-            r#"{"type":"Feature","geometry":{"type":"Polygon","coordinates":[[[0,0],[1,0],[0,0]]]},"properties":{"id":"a","layer":"marking","class":"diamond"}}"#,
-        );
-        assert!(e.contains("fewer than 3"), "{e}");
-        let e = err_of(&format!(
-            r#"{{"type":"Feature","geometry":{poly},"properties":{{"id":"a","layer":"marking","class":"diamond"}}}},
-               {{"type":"Feature","geometry":{poly},"properties":{{"id":"a","layer":"marking","class":"diamond"}}}}"#
-        ));
-        assert!(e.contains("feature 1") && e.contains("duplicate marking id"), "{e}");
         let e = from_geojson_str(r#"{"type":"Feature"}"#).unwrap_err();
         assert!(e.contains("expected a FeatureCollection"), "{e}");
-        let e = from_geojson_str(r#"{"type":"FeatureCollection","features":[],"crs":{"type":"name","properties":{"name":"bogus"}}}"#)
-            .unwrap_err();
+        let bogus = r#"{"type":"name","properties":{"name":"bogus"}}"#;
+        let e = from_geojson_str(&format!(
+            r#"{{"type":"FeatureCollection","features":[],"crs":{bogus}}}"#
+        ))
+        .unwrap_err();
         assert!(e.contains("unsupported crs name"), "{e}");
     }
 
@@ -774,7 +858,9 @@ mod tests {
         std::fs::write(&bad, "{ nope").unwrap();
         let e = read_geojson(&bad).unwrap_err().to_string();
         assert!(e.contains("bad.geojson") && e.contains("not valid JSON"), "{e}");
-        let e = read_geojson(&dir.path().join("missing.geojson")).unwrap_err().to_string();
+        let e = read_geojson(&dir.path().join("missing.geojson"))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("missing.geojson") && e.contains("cannot read"), "{e}");
     }
 

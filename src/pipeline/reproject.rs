@@ -20,6 +20,10 @@
 //! the test values were computed independently with pyproj 3.7 / PROJ 9.5.
 //!
 //! **Complexity.** O(1) per point, ≈ 1 M points/s on one core.
+//!
+//! [`Reprojector`]: crate::pipeline::reproject::Reprojector
+//! [`reproject_extraction`]: crate::pipeline::reproject::reproject_extraction
+//! [`Extraction`]: crate::pipeline::types::Extraction
 
 use super::types::{Crs, Extraction};
 use proj4rs::Proj;
@@ -73,7 +77,11 @@ fn proj_string(crs: &Crs) -> Result<String, String> {
     if why.is_empty() {
         why.push("it has neither an EPSG code nor a WKT".into());
     }
-    Err(format!("cannot reproject from {}: {}", crs_label(Some(crs)), why.join("; ")))
+    Err(format!(
+        "cannot reproject from {}: {}",
+        crs_label(Some(crs)),
+        why.join("; ")
+    ))
 }
 
 impl Reprojector {
@@ -140,7 +148,10 @@ impl Reprojector {
         if out.0.is_finite() && out.1.is_finite() {
             Ok(out)
         } else {
-            Err(format!("lon/lat ({lon}, {lat}) has no position in {}", self.label))
+            Err(format!(
+                "lon/lat ({lon}, {lat}) has no position in {}",
+                self.label
+            ))
         }
     }
 }
@@ -177,10 +188,12 @@ pub fn map_coords(
 /// Properties (lengths, headings) are kept as they are: they are metric values of the
 /// painted objects, not of the coordinates. Errors when `ex.crs` is unknown.
 pub fn reproject_extraction(ex: &Extraction, to: &Crs) -> Result<Extraction, String> {
-    let from = ex
-        .crs
-        .as_ref()
-        .ok_or_else(|| format!("cannot reproject to {}: the source CRS is unknown", crs_label(Some(to))))?;
+    let from = ex.crs.as_ref().ok_or_else(|| {
+        format!(
+            "cannot reproject to {}: the source CRS is unknown",
+            crs_label(Some(to))
+        )
+    })?;
     if from == to || (from.epsg.is_some() && from.epsg == to.epsg) {
         return Ok(ex.clone());
     }

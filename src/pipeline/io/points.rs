@@ -175,10 +175,18 @@ fn check_raw_header(path: &Path, file: &mut File) -> Result<Checked, PipelineErr
     if !head.starts_with(b"LASF") {
         let hint = match super::sniff(&head) {
             FileKind::Trajectory => " (it looks like a trajectory table)",
-            _ if head.iter().all(|b| b.is_ascii_graphic() || b.is_ascii_whitespace()) => " (it is a text file)",
+            _ if head
+                .iter()
+                .all(|b| b.is_ascii_graphic() || b.is_ascii_whitespace()) =>
+            {
+                " (it is a text file)"
+            }
             _ => "",
         };
-        return Err(err(path, format!("not a LAS/LAZ file: signature is not LASF{hint}")));
+        return Err(err(
+            path,
+            format!("not a LAS/LAZ file: signature is not LASF{hint}"),
+        ));
     }
     if file_len < MIN_HEADER_SIZE {
         return Err(err(
@@ -200,14 +208,18 @@ fn check_raw_header(path: &Path, file: &mut File) -> Result<Checked, PipelineErr
     if header_size < expected_header {
         return Err(err(
             path,
-            format!("corrupt header: header size {header_size} is below the {expected_header} bytes LAS {major}.{minor} needs"),
+            format!(
+                "corrupt header: header size {header_size} is below the {expected_header} bytes LAS {major}.{minor} needs"
+            ),
         ));
     }
     let offset_to_point_data = u64::from(raw.offset_to_point_data);
     if offset_to_point_data < header_size {
         return Err(err(
             path,
-            format!("corrupt header: point data offset {offset_to_point_data} lies inside the {header_size}-byte header"),
+            format!(
+                "corrupt header: point data offset {offset_to_point_data} lies inside the {header_size}-byte header"
+            ),
         ));
     }
     if offset_to_point_data > file_len {
@@ -247,7 +259,12 @@ fn check_raw_header(path: &Path, file: &mut File) -> Result<Checked, PipelineErr
     let point_bytes = point_count
         .checked_mul(record_len)
         .and_then(|b| b.checked_add(offset_to_point_data))
-        .ok_or_else(|| err(path, format!("corrupt header: implausible point count {point_count}")))?;
+        .ok_or_else(|| {
+            err(
+                path,
+                format!("corrupt header: implausible point count {point_count}"),
+            )
+        })?;
     if !format.is_compressed && point_bytes > file_len {
         let room = (file_len - offset_to_point_data) / record_len;
         return Err(err(
@@ -262,12 +279,17 @@ fn check_raw_header(path: &Path, file: &mut File) -> Result<Checked, PipelineErr
     if let Some(evlr) = raw.evlr {
         let start = evlr.start_of_first_evlr;
         if !format.is_compressed && start < point_bytes {
-            return Err(err(path, format!("corrupt header: the first EVLR (byte {start}) overlaps the point data")));
+            return Err(err(
+                path,
+                format!("corrupt header: the first EVLR (byte {start}) overlaps the point data"),
+            ));
         }
         if start.checked_add(60).is_none_or(|end| end > file_len) {
             return Err(err(
                 path,
-                format!("truncated file: the first EVLR should start at byte {start} but the file has {file_len} bytes"),
+                format!(
+                    "truncated file: the first EVLR should start at byte {start} but the file has {file_len} bytes"
+                ),
             ));
         }
         let mut evlr_head = [0u8; 60];
@@ -276,7 +298,9 @@ fn check_raw_header(path: &Path, file: &mut File) -> Result<Checked, PipelineErr
         if len > file_len - start - 60 {
             return Err(err(
                 path,
-                format!("truncated file: the EVLR at byte {start} announces {len} bytes past the end of the file"),
+                format!(
+                    "truncated file: the EVLR at byte {start} announces {len} bytes past the end of the file"
+                ),
             ));
         }
     }
@@ -290,9 +314,12 @@ fn check_raw_header(path: &Path, file: &mut File) -> Result<Checked, PipelineErr
 
 /// Step 1 for LAZ: laszip VLR and chunk table, before any decoding.
 fn check_laz(path: &Path, header: &las::Header, file: &mut File, c: &Checked) -> Result<(), PipelineError> {
-    let vlr = header
-        .laz_vlr()
-        .map_err(|e| err(path, format!("unreadable LAZ data: the laszip VLR is missing or invalid ({e})")))?;
+    let vlr = header.laz_vlr().map_err(|e| {
+        err(
+            path,
+            format!("unreadable LAZ data: the laszip VLR is missing or invalid ({e})"),
+        )
+    })?;
     let record_len = u64::from(header.point_format().len());
     if vlr.items_size() != record_len {
         return Err(err(
@@ -306,7 +333,10 @@ fn check_laz(path: &Path, header: &las::Header, file: &mut File, c: &Checked) ->
     let n = c.point_count;
     let data_start = c.offset_to_point_data;
     if data_start + 8 > c.file_len {
-        return Err(err(path, "truncated file: no compressed point data after the header"));
+        return Err(err(
+            path,
+            "truncated file: no compressed point data after the header",
+        ));
     }
     // The chunk table offset follows the header; writers that could not seek back leave it
     // invalid and repeat it in the last 8 bytes of the file (laz-rs `read_offset` does the same).
@@ -357,10 +387,11 @@ fn check_laz(path: &Path, header: &las::Header, file: &mut File, c: &Checked) ->
             format!("unreadable LAZ data: corrupt chunk table ({chunks} chunks in {compressed_bytes} bytes)"),
         ));
     }
-    file.seek(SeekFrom::Start(data_start)).map_err(|e| PipelineError::Io {
-        path: path.to_path_buf(),
-        source: e,
-    })?;
+    file.seek(SeekFrom::Start(data_start))
+        .map_err(|e| PipelineError::Io {
+            path: path.to_path_buf(),
+            source: e,
+        })?;
     let table = laz::laszip::ChunkTable::read_from(&mut BufReader::new(&mut *file), &vlr)
         .map_err(|e| err(path, format!("unreadable LAZ data: corrupt chunk table ({e})")))?;
     let entries = table.as_ref();
@@ -483,7 +514,10 @@ impl ScannerMap {
         let ud = layout.user_data;
         let ps = layout.point_source_id;
         let candidates: [(ScannerSource, Box<dyn Fn(&[u8]) -> usize>); 2] = [
-            (ScannerSource::UserData, Box::new(move |r: &[u8]| usize::from(r[ud]))),
+            (
+                ScannerSource::UserData,
+                Box::new(move |r: &[u8]| usize::from(r[ud])),
+            ),
             (
                 ScannerSource::PointSourceId,
                 Box::new(move |r: &[u8]| usize::from(le_u16(r, ps))),
@@ -692,7 +726,10 @@ impl PointReader {
                 return Err(err(&self.path, m));
             }
             Err(_) => {
-                let m = format!("{what} near point {}: the decoder failed on corrupt data", self.fetched);
+                let m = format!(
+                    "{what} near point {}: the decoder failed on corrupt data",
+                    self.fetched
+                );
                 self.failed = Some(m.clone());
                 return Err(err(&self.path, m));
             }
@@ -818,12 +855,18 @@ fn decode_slab(slab: &[u8], layout: &RecordLayout, scale: [f64; 3], shift: [f64;
     let coord = |r: &[u8], at: usize| i32::from_le_bytes(r[at..at + 4].try_into().expect("4 bytes"));
     let (sx, sy, sz) = (scale[0], scale[1], scale[2]);
     let (ox, oy, oz) = (shift[0], shift[1], shift[2]);
-    out.x.extend(recs.clone().map(|r| f64::from(coord(r, 0)) * sx + ox));
-    out.y.extend(recs.clone().map(|r| f64::from(coord(r, 4)) * sy + oy));
-    out.z.extend(recs.clone().map(|r| f64::from(coord(r, 8)) * sz + oz));
-    out.intensity.extend(recs.clone().map(|r| f32::from(le_u16(r, 12))));
+    out.x
+        .extend(recs.clone().map(|r| f64::from(coord(r, 0)) * sx + ox));
+    out.y
+        .extend(recs.clone().map(|r| f64::from(coord(r, 4)) * sy + oy));
+    out.z
+        .extend(recs.clone().map(|r| f64::from(coord(r, 8)) * sz + oz));
+    out.intensity
+        .extend(recs.clone().map(|r| f32::from(le_u16(r, 12))));
     match (layout.gps, &mut out.gps_time) {
-        (Some(g), Some(t)) => t.extend(recs.map(|r| f64::from_le_bytes(r[g..g + 8].try_into().expect("8 bytes")))),
+        (Some(g), Some(t)) => {
+            t.extend(recs.map(|r| f64::from_le_bytes(r[g..g + 8].try_into().expect("8 bytes"))))
+        }
         (None, t) => *t = None,
         (Some(_), None) => {}
     }
