@@ -15,6 +15,8 @@ pub mod error;
 pub mod geojson;
 /// LAS/LAZ and trajectory readers, CRS detection.
 pub mod io;
+/// The learned marking classifier (PointNet++ through ONNX Runtime).
+pub mod learned;
 /// Every tunable parameter with its documented default, validated before any point is read.
 pub mod params;
 /// Stage 1: pavement extraction guided by the trajectory.
