@@ -25,6 +25,8 @@ pub mod io;
 pub mod lanes;
 /// Marking outlines: rectangles, buffered centrelines, alpha shapes (part of stage 6).
 pub mod outline;
+/// The learned marking classifier (PointNet++ through ONNX Runtime).
+pub mod learned;
 /// Every tunable parameter with its documented default, validated before any point is read.
 pub mod params;
 /// Stage 1: pavement extraction guided by the trajectory.
