@@ -135,7 +135,11 @@ fn assert_same_points(cloud: &PointCloud, pts: &[Point], format: &Format, what: 
         for (g, e) in got.iter().zip([p.x, p.y, p.z]) {
             assert!((g - e).abs() < 5e-4, "{what}: point {i} coordinate {g} vs {e}");
         }
-        assert_eq!(cloud.intensity[i], f32::from(p.intensity), "{what}: intensity {i}");
+        assert_eq!(
+            cloud.intensity[i],
+            f32::from(p.intensity),
+            "{what}: intensity {i}"
+        );
     }
     match (&cloud.gps_time, format.has_gps_time) {
         (Some(t), true) => {
@@ -144,7 +148,10 @@ fn assert_same_points(cloud: &PointCloud, pts: &[Point], format: &Format, what: 
             }
         }
         (None, false) => {}
-        (t, has) => panic!("{what}: gps_time {:?} but format has gps: {has}", t.as_ref().map(|t| t.len())),
+        (t, has) => panic!(
+            "{what}: gps_time {:?} but format has gps: {has}",
+            t.as_ref().map(|t| t.len())
+        ),
     }
     // Two heads told apart: the scanner channel (6–10) or user_data 3/7 (0–5).
     for (i, s) in cloud.scanner.iter().enumerate() {
@@ -164,7 +171,9 @@ fn every_point_format_and_version_round_trips_las_and_laz() {
         for version in versions {
             for ext in ["las", "laz"] {
                 let what = format!("format {format_id} LAS {}.{} {ext}", version.0, version.1);
-                let path = dir.path().join(format!("f{format_id}_{}{}.{ext}", version.0, version.1));
+                let path = dir
+                    .path()
+                    .join(format!("f{format_id}_{}{}.{ext}", version.0, version.1));
                 let pts = write_drive(&path, &Spec::new(version, format_id), 300);
                 let s = inspect_points(&path).unwrap_or_else(|e| panic!("{what}: {e}"));
                 assert_eq!(s.point_count, 300, "{what}");
@@ -177,7 +186,15 @@ fn every_point_format_and_version_round_trips_las_and_laz() {
                 assert_same_points(&cloud, &pts, &format, &what);
                 assert_eq!(cloud.origin, [231_456.0, 3_380_123.0, 12.0], "{what}: origin");
                 let kind = sniff_file(&path).unwrap();
-                assert_eq!(kind, if ext == "laz" { FileKind::Laz } else { FileKind::Las }, "{what}");
+                assert_eq!(
+                    kind,
+                    if ext == "laz" {
+                        FileKind::Laz
+                    } else {
+                        FileKind::Las
+                    },
+                    "{what}"
+                );
                 let r = PointReader::open(&path).unwrap();
                 let expected = if format.is_extended {
                     ScannerSource::Channel
@@ -212,7 +229,10 @@ fn streaming_in_any_chunk_size_gives_the_same_points() {
                 assert_eq!(buf.origin, all.origin);
                 for k in (0..n).step_by(97) {
                     assert_eq!(buf.x[k], all.x[seen + k], "{ext} chunk {chunk}");
-                    assert_eq!(buf.gps_time.as_ref().unwrap()[k], all.gps_time.as_ref().unwrap()[seen + k]);
+                    assert_eq!(
+                        buf.gps_time.as_ref().unwrap()[k],
+                        all.gps_time.as_ref().unwrap()[seen + k]
+                    );
                     assert_eq!(buf.scanner[k], all.scanner[seen + k]);
                 }
                 seen += n;
@@ -261,7 +281,10 @@ fn several_tiles_share_the_first_tiles_origin() {
         10,
     );
     let e = input_error(read_points(&[&pa, &pd]));
-    assert!(e.contains("d.las") && e.contains("EPSG:32651") && e.contains("EPSG:32650"), "{e}");
+    assert!(
+        e.contains("d.las") && e.contains("EPSG:32651") && e.contains("EPSG:32650"),
+        "{e}"
+    );
     let e = input_error(read_points(&[]));
     assert!(e.contains("no point cloud files"), "{e}");
 }
@@ -401,13 +424,19 @@ fn corrupt_headers_name_the_problem() {
     let p = dir.path().join("ok.las");
     write_drive(&p, &Spec::new((1, 2), 1), 10);
     let good = std::fs::read(&p).unwrap();
-    let cases: [(&str, fn(&mut Vec<u8>)); 4] = [
+    let cases: [(&str, fn(&mut Vec<u8>)); 5] = [
+        (
+            "5 VLRs announced but VLR 1 would start inside the point data",
+            |b| b[100..104].copy_from_slice(&5u32.to_le_bytes()),
+        ),
         ("unsupported LAS version 2.2", |b| b[24] = 2),
         ("unsupported point format 11", |b| b[104] = 11),
         ("point record length 20 is shorter than format 1", |b| {
             b[105..107].copy_from_slice(&20u16.to_le_bytes())
         }),
-        ("point data should start at byte", |b| b[96..100].copy_from_slice(&9_000u32.to_le_bytes())),
+        ("point data should start at byte", |b| {
+            b[96..100].copy_from_slice(&9_000u32.to_le_bytes())
+        }),
     ];
     for (expected, damage) in cases {
         let mut b = good.clone();
@@ -436,7 +465,10 @@ fn fuzzed_inputs_never_panic() {
         2_000,
     );
     write_drive(&laz_path, &Spec::new((1, 4), 6), 60_000);
-    let seeds = [std::fs::read(&las_path).unwrap(), std::fs::read(&laz_path).unwrap()];
+    let seeds = [
+        std::fs::read(&las_path).unwrap(),
+        std::fs::read(&laz_path).unwrap(),
+    ];
     let t = dir.path().join("fuzz.las");
     let try_all = |bytes: &[u8]| {
         std::fs::write(&t, bytes).unwrap();
@@ -486,7 +518,10 @@ fn trajectory_files() {
     assert!(e.contains("t.txt") && e.contains("empty trajectory"), "{e}");
     std::fs::write(&p, "foo;bar\n1;2\n").unwrap();
     let e = input_error(read_trajectory(&p));
-    assert!(e.contains("unknown column layout: found columns [foo, bar]"), "{e}");
+    assert!(
+        e.contains("unknown column layout: found columns [foo, bar]"),
+        "{e}"
+    );
     assert!(e.contains("missing required time, x, y"), "{e}");
     std::fs::write(&p, "Time\tX\tY\tHeading\n0\t0\t0\t90\n1\t10\t0\t90\n").unwrap();
     let t = read_trajectory(&p).unwrap();
@@ -506,13 +541,22 @@ fn real_nwu_rovereto() {
     let p = d.join("points.las");
     assert_eq!(sniff_file(&p).unwrap(), FileKind::Las);
     let s = inspect_points(&p).unwrap();
-    assert_eq!((s.point_count, s.point_format, s.version.as_str()), (18_496, 1, "1.2"));
+    assert_eq!(
+        (s.point_count, s.point_format, s.version.as_str()),
+        (18_496, 1, "1.2")
+    );
     assert!(s.crs.is_none(), "the file has no CRS VLR");
     let c = read_points(&[&p]).unwrap();
     assert_eq!(c.len(), 18_496);
     // Intensity 20–84 stored × 256.
-    let (lo, hi) = c.intensity.iter().fold((f32::MAX, 0f32), |(a, b), &v| (a.min(v), b.max(v)));
-    assert!(lo >= 20.0 * 256.0 - 1.0 && hi <= 84.0 * 256.0 + 256.0, "{lo}..{hi}");
+    let (lo, hi) = c
+        .intensity
+        .iter()
+        .fold((f32::MAX, 0f32), |(a, b), &v| (a.min(v), b.max(v)));
+    assert!(
+        lo >= 20.0 * 256.0 - 1.0 && hi <= 84.0 * 256.0 + 256.0,
+        "{lo}..{hi}"
+    );
     assert!(c.scanner.iter().all(|&s| s == 0));
     let t = read_trajectory(&d.join("trajectory.csv")).unwrap();
     assert_eq!(t.poses().len(), 9);
@@ -568,7 +612,10 @@ fn real_amsterdam_laz_tiles() {
     // Every point lies inside the union of the tile bounds (all relative to one origin).
     for i in (0..c.len()).step_by(101) {
         let (x, y) = (c.x[i] + c.origin[0], c.y[i] + c.origin[1]);
-        assert!((114_590.0..114_760.0).contains(&x) && (484_890.0..485_110.0).contains(&y), "{x} {y}");
+        assert!(
+            (114_590.0..114_760.0).contains(&x) && (484_890.0..485_110.0).contains(&y),
+            "{x} {y}"
+        );
     }
     // Intensity quantised to ~99 levels.
     let mut levels: Vec<u32> = c.intensity.iter().map(|&v| v as u32).collect();
@@ -586,7 +633,10 @@ fn real_whu_templates_have_no_intensity() {
     let s = inspect_points(&p).unwrap();
     assert_eq!(s.point_count, 533);
     let e = input_error(read_points(&[&p]));
-    assert!(e.contains("model03_forward_arrow.las") && e.contains("has no intensity values"), "{e}");
+    assert!(
+        e.contains("model03_forward_arrow.las") && e.contains("has no intensity values"),
+        "{e}"
+    );
     let opts = ReadOptions {
         require_intensity: false,
         ..Default::default()

@@ -63,17 +63,23 @@ pub fn crs_from_header(header: &las::Header) -> Option<Crs> {
 }
 
 fn geotiff_u16(crs: &las::crs::GeoTiffCrs, key: u16) -> Option<u16> {
-    crs.entries.iter().find(|e| e.id == key).and_then(|e| match e.data {
-        las::crs::GeoTiffData::U16(v) => Some(v),
-        _ => None,
-    })
+    crs.entries
+        .iter()
+        .find(|e| e.id == key)
+        .and_then(|e| match e.data {
+            las::crs::GeoTiffData::U16(v) => Some(v),
+            _ => None,
+        })
 }
 
 fn geotiff_string(crs: &las::crs::GeoTiffCrs, key: u16) -> Option<&str> {
-    crs.entries.iter().find(|e| e.id == key).and_then(|e| match &e.data {
-        las::crs::GeoTiffData::String(s) => Some(s.trim_end_matches(['|', '\0']).trim()),
-        _ => None,
-    })
+    crs.entries
+        .iter()
+        .find(|e| e.id == key)
+        .and_then(|e| match &e.data {
+            las::crs::GeoTiffData::String(s) => Some(s.trim_end_matches(['|', '\0']).trim()),
+            _ => None,
+        })
 }
 
 /// EPSG code from GeoTIFF keys (see the module docs for the order of the rules).
@@ -238,7 +244,9 @@ fn own_epsg(node: &Node) -> Option<u32> {
     node.items
         .iter()
         .filter_map(|item| match item {
-            Item::Node(n) if n.keyword.eq_ignore_ascii_case("AUTHORITY") || n.keyword.eq_ignore_ascii_case("ID") => {
+            Item::Node(n)
+                if n.keyword.eq_ignore_ascii_case("AUTHORITY") || n.keyword.eq_ignore_ascii_case("ID") =>
+            {
                 let authority = match n.items.first()? {
                     Item::Text(s) | Item::Word(s) => s,
                     Item::Node(_) => return None,
@@ -419,7 +427,10 @@ mod tests {
         assert_eq!(epsg_from_name("ETRS89 / UTM zone 32N"), Some(25832));
         assert_eq!(epsg_from_name("NAD83 / UTM zone 17N"), Some(26917));
         assert_eq!(epsg_from_name("Amersfoort / RD New"), Some(28992));
-        assert_eq!(epsg_from_name("CGCS2000 / 3-degree Gauss-Kruger CM 117E"), Some(4548));
+        assert_eq!(
+            epsg_from_name("CGCS2000 / 3-degree Gauss-Kruger CM 117E"),
+            Some(4548)
+        );
         assert_eq!(epsg_from_name("my local grid"), None);
     }
 

@@ -29,9 +29,7 @@ pub mod points;
 pub mod trajectory;
 
 pub use points::{PointReader, ReadOptions, ScannerSource, inspect_points, read_points, read_points_with};
-pub use trajectory::{
-    Delimiter, TrajectorySummary, inspect_trajectory, parse_trajectory, read_trajectory,
-};
+pub use trajectory::{Delimiter, TrajectorySummary, inspect_trajectory, parse_trajectory, read_trajectory};
 
 use super::error::PipelineError;
 use super::types::Crs;

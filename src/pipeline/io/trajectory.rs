@@ -156,7 +156,10 @@ enum HeaderError {
     /// The line holds only numbers.
     Numeric,
     /// Names found, but the required ones are missing.
-    Missing { found: Vec<String>, missing: Vec<&'static str> },
+    Missing {
+        found: Vec<String>,
+        missing: Vec<&'static str>,
+    },
     /// A known column appears twice.
     Duplicate(&'static str),
 }
@@ -187,7 +190,10 @@ fn parse_header(line: &str) -> Result<Layout, HeaderError> {
         .map(|f| f.name())
         .collect();
     if !missing.is_empty() {
-        return Err(HeaderError::Missing { found: names, missing });
+        return Err(HeaderError::Missing {
+            found: names,
+            missing,
+        });
     }
     Ok(Layout {
         delimiter,
@@ -250,9 +256,10 @@ fn find_header(text: &str, path: &Path) -> Result<(Layout, usize), PipelineError
                     ),
                 ))
             }
-            Err(HeaderError::Missing { found, missing }) => {
-                Err(PipelineError::input(path, missing_columns_message(&found, &missing)))
-            }
+            Err(HeaderError::Missing { found, missing }) => Err(PipelineError::input(
+                path,
+                missing_columns_message(&found, &missing),
+            )),
             Err(HeaderError::Duplicate(name)) => Err(PipelineError::input(
                 path,
                 format!("column '{name}' appears more than once in the header (line {no})"),
@@ -301,10 +308,7 @@ pub fn parse_trajectory(text: &str, name_for_errors: &Path) -> Result<Trajectory
 }
 
 /// Parse a trajectory table and describe it.
-pub fn parse_with_summary(
-    text: &str,
-    path: &Path,
-) -> Result<(Trajectory, TrajectorySummary), PipelineError> {
+pub fn parse_with_summary(text: &str, path: &Path) -> Result<(Trajectory, TrajectorySummary), PipelineError> {
     let (layout, header_line) = find_header(text, path)?;
     let needed = layout.index.iter().flatten().max().copied().unwrap_or(0) + 1;
     let mut poses = Vec::new();
@@ -341,7 +345,10 @@ pub fn parse_with_summary(
                 if required {
                     return Err(PipelineError::input(
                         path,
-                        format!("line {no}, column '{}': empty cell, a number is required", field.name()),
+                        format!(
+                            "line {no}, column '{}': empty cell, a number is required",
+                            field.name()
+                        ),
                     ));
                 }
                 continue;
@@ -360,7 +367,10 @@ pub fn parse_with_summary(
             if required && !v.is_finite() {
                 return Err(PipelineError::input(
                     path,
-                    format!("line {no}, column '{}': '{cell}' is not a finite number", field.name()),
+                    format!(
+                        "line {no}, column '{}': '{cell}' is not a finite number",
+                        field.name()
+                    ),
                 ));
             }
             values[field as usize] = v;
@@ -459,7 +469,10 @@ pub(super) fn looks_like_trajectory(head: &[u8]) -> bool {
             _ => return false,
         },
     };
-    if text.chars().any(|c| c.is_control() && !matches!(c, '\n' | '\r' | '\t')) {
+    if text
+        .chars()
+        .any(|c| c.is_control() && !matches!(c, '\n' | '\r' | '\t'))
+    {
         return false;
     }
     let mut last_comment = None;
@@ -470,9 +483,7 @@ pub(super) fn looks_like_trajectory(head: &[u8]) -> bool {
         }
         return match parse_header(line) {
             Ok(_) => true,
-            Err(HeaderError::Numeric) => {
-                last_comment.is_some_and(|c| parse_header(strip_comment(c)).is_ok())
-            }
+            Err(HeaderError::Numeric) => last_comment.is_some_and(|c| parse_header(strip_comment(c)).is_ok()),
             Err(_) => false,
         };
     }
@@ -539,7 +550,10 @@ mod tests {
             "{e}"
         );
         let e = parse("time,x,y\n0,1,2\n1,abc,3\n").unwrap_err();
-        assert!(e.contains("line 3") && e.contains("'x'") && e.contains("'abc'"), "{e}");
+        assert!(
+            e.contains("line 3") && e.contains("'x'") && e.contains("'abc'"),
+            "{e}"
+        );
         let e = parse("time,x,y\n0,1,2\n1,2\n").unwrap_err();
         assert!(e.contains("line 3 has 2 cells"), "{e}");
         let e = parse("time,x,y\n0,1,2\n").unwrap_err();
@@ -562,6 +576,8 @@ mod tests {
         assert!(!looks_like_trajectory(b"time,x,y\0\0\0"));
         assert!(!looks_like_trajectory(b""));
         // Cut in the middle of a multi-byte character.
-        assert!(looks_like_trajectory("time,x,y,\"é".as_bytes().split_last().unwrap().1));
+        assert!(looks_like_trajectory(
+            "time,x,y,\"é".as_bytes().split_last().unwrap().1
+        ));
     }
 }
