@@ -541,20 +541,14 @@ impl ScannerMap {
         }
         let ud = layout.user_data;
         let ps = layout.point_source_id;
-        let candidates: [(ScannerSource, Box<dyn Fn(&[u8]) -> usize>); 2] = [
-            (
-                ScannerSource::UserData,
-                Box::new(move |r: &[u8]| usize::from(r[ud])),
-            ),
-            (
-                ScannerSource::PointSourceId,
-                Box::new(move |r: &[u8]| usize::from(le_u16(r, ps))),
-            ),
-        ];
-        for (source, value) in candidates {
+        let value = |source: ScannerSource, r: &[u8]| match source {
+            ScannerSource::UserData => usize::from(r[ud]),
+            _ => usize::from(le_u16(r, ps)),
+        };
+        for source in [ScannerSource::UserData, ScannerSource::PointSourceId] {
             let mut counts = vec![0usize; 1 << 16];
             for r in recs() {
-                counts[value(r)] += 1;
+                counts[value(source, r)] += 1;
             }
             let distinct: Vec<usize> = (0..counts.len()).filter(|&v| counts[v] > 0).collect();
             let balanced = distinct.iter().all(|&v| counts[v] * 20 >= n);
