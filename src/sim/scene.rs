@@ -1007,12 +1007,12 @@ fn urban(name: &str, opt: &SceneOptions, rng: &mut ChaCha8Rng, style: UrbanStyle
         rho: if worn { 0.1 } else { 0.075 },
     });
     let (asphalt, texture, wear) = match style {
-        UrbanStyle::Worn => (0.16, 0.35, 0.55),
+        UrbanStyle::Worn => (0.16, 0.35, 0.4),
         _ => (0.12, 0.25, 0.12),
     };
     for mk in &mut m.markings {
         mk.wear = if worn {
-            uniform(rng, 0.0, 0.3)
+            uniform(rng, 0.0, 0.25)
         } else {
             uniform(rng, 0.0, 0.15)
         };
@@ -1026,7 +1026,7 @@ fn urban(name: &str, opt: &SceneOptions, rng: &mut ChaCha8Rng, style: UrbanStyle
         lane_c(2),
         lane_c(3),
     ]);
-    refl.track_wear = if worn { 0.45 } else { 0.25 };
+    refl.track_wear = if worn { 0.35 } else { 0.25 };
     let heads = if style == UrbanStyle::DualHead {
         Head::butterfly()
     } else {
