@@ -1411,18 +1411,36 @@ async fn graceful_shutdown_releases_running_jobs_for_the_next_start() {
 // End to end: the real pipeline on a simulated survey, scored with the evaluator
 // =============================================================================================
 
-/// `roadmark simulate --scene NAME --out DIR` (the binary under test).
-fn simulate(scene: &str, out: &Path) {
+/// `roadmark simulate --scene NAME --out DIR` (the binary under test): an 80 m drive cut into
+/// `tiles` LAS tiles; returns the tile paths.
+fn simulate(scene: &str, out: &Path, tiles: usize) -> Vec<PathBuf> {
     let status = std::process::Command::new(env!("CARGO_BIN_EXE_roadmark"))
-        .args(["simulate", "--scene", scene, "--out"])
+        .args([
+            "simulate",
+            "--scene",
+            scene,
+            "--seed",
+            "7",
+            "--length-m",
+            "80",
+            "--tiles",
+        ])
+        .arg(tiles.to_string())
+        .arg("--out")
         .arg(out)
-        .args(["--seed", "7"])
         .status()
         .expect("running roadmark simulate");
     assert!(status.success(), "roadmark simulate --scene {scene} failed");
+    if tiles == 1 {
+        vec![out.join("points.las")]
+    } else {
+        (0..tiles)
+            .map(|i| out.join(format!("points_{i:03}.las")))
+            .collect()
+    }
 }
 
-/// Score a fetched GeoJSON against the survey's truth; returns the object-level F-score.
+/// Score a fetched GeoJSON against the survey's truth.
 fn score(fc: &Value, truth: &Path) -> roadmark::eval::Report {
     let result =
         roadmark::pipeline::geojson::from_geojson(fc).expect("the result parses in the contract schema");
@@ -1430,90 +1448,81 @@ fn score(fc: &Value, truth: &Path) -> roadmark::eval::Report {
     roadmark::eval::evaluate(&truth, &result, &roadmark::eval::EvalOptions::default()).unwrap()
 }
 
-/// Run the pipeline directly on the same files, for comparison with the service's answer.
-fn direct(survey: &Path) -> Extraction {
-    let inputs = Inputs {
-        points: vec![survey.join("points.las")],
-        trajectory: survey.join("trajectory.csv"),
-    };
-    let params = roadmark::pipeline::params::Params::default().validate().unwrap();
-    roadmark::pipeline::run(&inputs, &params, &roadmark::pipeline::NoProgress).unwrap()
-}
-
-async fn check_end_to_end(app: &TestApp, id: &str, survey: &Path) {
+/// Poll to `succeeded`, fetch the result in both CRS modes, compare with the pipeline run
+/// directly on the same files, and score both answers with the evaluator.
+async fn check_end_to_end(app: &TestApp, id: &str, tiles: &[PathBuf], survey: &Path) {
     let job = app.wait_finished(id, Duration::from_secs(900)).await;
     assert_eq!(job["status"], "succeeded", "{job}");
+    assert_eq!(job["attempts"], 1);
     let (status, native) = app.result(id, Some("native")).await;
     assert_eq!(status, 200, "{native}");
     let (status, wgs84) = app.result(id, Some("wgs84")).await;
     assert_eq!(status, 200, "{wgs84}");
     let (_, default) = app.result(id, None).await;
     assert_eq!(default, wgs84, "wgs84 is the default when the CRS is known");
-    assert!(
-        native["crs"]["properties"]["name"]
-            .as_str()
-            .unwrap()
-            .starts_with("EPSG:"),
+    assert_eq!(
+        native["crs"]["properties"]["name"], "EPSG:32650",
         "{}",
         native["crs"]
     );
-    let lon = wgs84["features"][0]["geometry"]["coordinates"][0][0][0]
-        .as_f64()
-        .unwrap();
-    assert!((-180.0..=180.0).contains(&lon));
+    assert!(wgs84.get("crs").is_none(), "RFC 7946 output has no crs member");
 
-    // Same answer as the pipeline run directly on the files.
+    // The service's answer is the pipeline's answer.
     let served = roadmark::pipeline::geojson::from_geojson(&native).unwrap();
-    let expected = direct(survey);
+    let inputs = Inputs {
+        points: tiles.to_vec(),
+        trajectory: survey.join("trajectory.csv"),
+    };
+    let params = roadmark::pipeline::params::Params::default().validate().unwrap();
+    let expected = roadmark::pipeline::run(&inputs, &params, &roadmark::pipeline::NoProgress).unwrap();
     assert_eq!(served.markings.len(), expected.markings.len());
     assert_eq!(served.lane_lines.len(), expected.lane_lines.len());
+    assert!(!served.markings.is_empty(), "no markings found");
 
     let truth = survey.join("truth.geojson");
-    let r_native = score(&native, &truth);
-    let r_wgs84 = score(&wgs84, &truth);
-    println!("evaluation (native):\n{}", r_native.to_text());
-    assert!(!served.markings.is_empty(), "no markings found");
+    let (r_native, r_wgs84) = (score(&native, &truth), score(&wgs84, &truth));
+    println!(
+        "evaluation of the service's answer (crs=native):\n{}",
+        r_native.to_text()
+    );
     let f = |r: &roadmark::eval::Report| r.pixel.f_score.unwrap_or(0.0);
+    assert!(f(&r_native) > 0.0, "nothing of the truth was found");
     assert!(
         (f(&r_native) - f(&r_wgs84)).abs() < 0.02,
-        "the CRS of the answer changes the score"
+        "the CRS of the answer changes the score: {} vs {}",
+        f(&r_native),
+        f(&r_wgs84)
     );
 }
 
 #[tokio::test]
 async fn end_to_end_simulated_survey_by_upload_ids() {
     let survey = tempfile::tempdir().unwrap();
-    simulate("straight", survey.path());
+    let tiles = simulate("highway", survey.path(), 1);
     let app = spawn_app().await;
     let p = app
-        .upload_ok(
-            std::fs::read(survey.path().join("points.las")).unwrap(),
-            "points.las",
-        )
+        .upload_ok(std::fs::read(&tiles[0]).unwrap(), "points.las")
         .await;
-    let t = app
-        .upload_ok(
-            std::fs::read(survey.path().join("trajectory.csv")).unwrap(),
-            "trajectory.csv",
-        )
-        .await;
+    let traj = std::fs::read(survey.path().join("trajectory.csv")).unwrap();
+    let t = app.upload_ok(traj, "trajectory.csv").await;
     let id = app.job_ok(json!({"points": [p], "trajectory": t})).await;
-    check_end_to_end(&app, &id, survey.path()).await;
+    check_end_to_end(&app, &id, &tiles, survey.path()).await;
     app.stop().await;
 }
 
 #[tokio::test]
-async fn end_to_end_simulated_survey_by_multipart() {
+async fn end_to_end_simulated_survey_by_multipart_with_two_tiles() {
     let survey = tempfile::tempdir().unwrap();
-    simulate("straight", survey.path());
+    let tiles = simulate("highway", survey.path(), 2);
     let app = spawn_app().await;
-    let file = |name: &str| {
-        reqwest::multipart::Part::bytes(std::fs::read(survey.path().join(name)).unwrap())
-            .file_name(name.to_string())
+    let file = |path: &Path| {
+        let name = path.file_name().unwrap().to_string_lossy().to_string();
+        reqwest::multipart::Part::bytes(std::fs::read(path).unwrap()).file_name(name)
     };
     let form = reqwest::multipart::Form::new()
-        .part("points", file("points.las"))
-        .part("trajectory", file("trajectory.csv"));
+        .part("points", file(&tiles[0]))
+        .part("points", file(&tiles[1]))
+        .part("trajectory", file(&survey.path().join("trajectory.csv")));
     let r = app
         .client
         .post(app.url("/v1/jobs"))
@@ -1523,6 +1532,6 @@ async fn end_to_end_simulated_survey_by_multipart() {
         .unwrap();
     assert_eq!(r.status(), 201);
     let job: Value = r.json().await.unwrap();
-    check_end_to_end(&app, job["id"].as_str().unwrap(), survey.path()).await;
+    check_end_to_end(&app, job["id"].as_str().unwrap(), &tiles, survey.path()).await;
     app.stop().await;
 }
