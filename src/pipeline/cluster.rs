@@ -252,9 +252,9 @@ fn rest_components(pts: &[[f64; 2]], rest: &[usize], p: &Params) -> (Vec<Vec<usi
 fn profile_split(pts: &[[f64; 2]], p: &Params) -> Option<Vec<Vec<usize>>> {
     let pca = Pca::of(pts);
     let uv = frame(pts, &pca);
-    let (umin, umax) = uv
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |a, q| (a.0.min(q[0]), a.1.max(q[0])));
+    let (umin, umax) = uv.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, q| {
+        (a.0.min(q[0]), a.1.max(q[0]))
+    });
     let len = umax - umin;
     if len < 3.0 {
         return None;
@@ -303,7 +303,10 @@ fn profile_split(pts: &[[f64; 2]], p: &Params) -> Option<Vec<Vec<usize>>> {
         return None;
     }
     // Centre line: medians of clean slices, interpolated by local linear fits over wide ones.
-    let cu: Vec<f64> = (0..ns).filter(|&k| clean[k]).map(|k| umin + (k as f64 + 0.5) * DS).collect();
+    let cu: Vec<f64> = (0..ns)
+        .filter(|&k| clean[k])
+        .map(|k| umin + (k as f64 + 0.5) * DS)
+        .collect();
     let cv: Vec<f64> = (0..ns).filter(|&k| clean[k]).map(|k| mid[k]).collect();
     let cw = vec![1.0; cu.len()];
     let centre: Vec<f64> = (0..ns)
@@ -370,9 +373,9 @@ fn profile_split(pts: &[[f64; 2]], p: &Params) -> Option<Vec<Vec<usize>>> {
 fn valley_split(pts: &[[f64; 2]], p: &Params) -> Option<Vec<Vec<usize>>> {
     let pca = Pca::of(pts);
     let uv = frame(pts, &pca);
-    let (umin, umax) = uv
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |a, q| (a.0.min(q[0]), a.1.max(q[0])));
+    let (umin, umax) = uv.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, q| {
+        (a.0.min(q[0]), a.1.max(q[0]))
+    });
     let len = umax - umin;
     // Across: residual from a smoothed centre (slice means), so curved pairs split too.
     const DS: f64 = 0.5;
@@ -521,7 +524,9 @@ fn bar_split(pts: &[[f64; 2]], p: &Params) -> Option<Vec<Vec<usize>>> {
     };
     // Candidate directions: the local maxima of the coarse score (2° steps), best first.
     let mut h = Vec::new();
-    let coarse: Vec<(u32, usize)> = (0..90).map(|k| score_at((k as f64 * 2.0).to_radians(), &mut h)).collect();
+    let coarse: Vec<(u32, usize)> = (0..90)
+        .map(|k| score_at((k as f64 * 2.0).to_radians(), &mut h))
+        .collect();
     let top = coarse.iter().map(|c| c.0).max().unwrap_or(0);
     let mut peaks: Vec<usize> = (0..90)
         .filter(|&k| {
@@ -701,7 +706,10 @@ mod tests {
     fn degenerate_inputs() {
         let p = Params::default();
         assert!(run(&PointCloud::default(), &p).is_empty());
-        assert!(run(&cloud(&[[0.0, 0.0]]), &p).is_empty(), "one point is below min_points");
+        assert!(
+            run(&cloud(&[[0.0, 0.0]]), &p).is_empty(),
+            "one point is below min_points"
+        );
         let one = Params {
             min_points: 1,
             ..Params::default()
@@ -712,7 +720,11 @@ mod tests {
         assert_eq!(c.len(), 1, "collinear points stay one cluster");
         let mut nan = cloud(&line);
         nan.x[3] = f64::NAN;
-        assert_eq!(run(&nan, &p)[0].indices.len(), 99, "non-finite points are ignored");
+        assert_eq!(
+            run(&nan, &p)[0].indices.len(),
+            99,
+            "non-finite points are ignored"
+        );
     }
 
     #[test]
@@ -737,7 +749,10 @@ mod tests {
         // Touching: only the dash's boundary row (1 of 6) is ambiguous.
         let wrong = solid.indices.iter().filter(|&&i| i >= nsolid).count();
         let ndash = pts.len() - nsolid;
-        assert!(wrong * 5 < ndash, "dash points left in the solid: {wrong} of {ndash}");
+        assert!(
+            wrong * 5 < ndash,
+            "dash points left in the solid: {wrong} of {ndash}"
+        );
         assert!(c.iter().all(|c| c.split));
     }
 
@@ -806,8 +821,8 @@ mod tests {
 
     #[test]
     fn result_does_not_depend_on_point_order() {
-        use rand::seq::SliceRandom;
         use rand::SeedableRng;
+        use rand::seq::SliceRandom;
         let mut pts = rect(0.0, 0.0, 30.0, 0.15, 10.0, 0.04, 1);
         pts.extend(rect(3.0, 0.7, 6.0, 0.15, 10.0, 0.04, 2));
         pts.extend(rect(0.0, 5.0, 5.0, 0.45, 100.0, 0.04, 3));
@@ -819,7 +834,12 @@ mod tests {
         let b = run(&cloud(&shuffled), &Params::default());
         let as_coords = |cs: &[Cluster], p: &[[f64; 2]]| -> Vec<Vec<[u64; 2]>> {
             cs.iter()
-                .map(|c| c.indices.iter().map(|&i| [p[i][0].to_bits(), p[i][1].to_bits()]).collect())
+                .map(|c| {
+                    c.indices
+                        .iter()
+                        .map(|&i| [p[i][0].to_bits(), p[i][1].to_bits()])
+                        .collect()
+                })
                 .collect()
         };
         assert_eq!(as_coords(&a, &pts), as_coords(&b, &shuffled));

@@ -108,8 +108,7 @@ pub fn components(xy: &[[f64; 2]], r: f64) -> Vec<Vec<usize>> {
     let cell = r / std::f64::consts::SQRT_2 * 0.999;
     let grid = GridIndex::new(xy, cell);
     let ncell = grid.keys.len();
-    let cell_id: HashMap<(i64, i64), usize> =
-        grid.keys.iter().enumerate().map(|(i, &k)| (k, i)).collect();
+    let cell_id: HashMap<(i64, i64), usize> = grid.keys.iter().enumerate().map(|(i, &k)| (k, i)).collect();
     let mut parent: Vec<usize> = (0..ncell).collect();
     fn find(parent: &mut [usize], mut a: usize) -> usize {
         while parent[a] != a {
@@ -222,7 +221,11 @@ pub fn robust_extent(v: &[f64]) -> (f64, f64) {
     let n = v.len();
     if n < 40 {
         let (lo, hi) = (v[0], v[n - 1]);
-        let pad = if n > 1 { (hi - lo) / (n - 1) as f64 / 2.0 } else { 0.0 };
+        let pad = if n > 1 {
+            (hi - lo) / (n - 1) as f64 / 2.0
+        } else {
+            0.0
+        };
         return (lo - pad, hi + pad);
     }
     let p = if n >= 100 { 0.02 } else { 0.01 };
@@ -446,7 +449,12 @@ impl BarShape {
         us.sort_unstable_by(f64::total_cmp);
         vs.sort_unstable_by(f64::total_cmp);
         if xy.is_empty() {
-            return BarShape { pca, u: (0.0, 0.0), v: (0.0, 0.0), fill: 0.0 };
+            return BarShape {
+                pca,
+                u: (0.0, 0.0),
+                v: (0.0, 0.0),
+                fill: 0.0,
+            };
         }
         let u = robust_extent(&us);
         let v = robust_extent(&vs);
@@ -520,7 +528,10 @@ mod tests {
         let c = components(&[[0.0, 0.0], [0.3, 0.0], [0.6000001, 0.0]], 0.3);
         assert_eq!(c, vec![vec![0, 1], vec![2]]);
         // Duplicates and collinear points.
-        let pts: Vec<[f64; 2]> = (0..50).map(|i| [i as f64 * 0.1, 0.0]).chain([[0.0, 0.0]]).collect();
+        let pts: Vec<[f64; 2]> = (0..50)
+            .map(|i| [i as f64 * 0.1, 0.0])
+            .chain([[0.0, 0.0]])
+            .collect();
         assert_eq!(components(&pts, 0.15).len(), 1);
     }
 

@@ -214,11 +214,18 @@ fn end_slope(so: &[[f64; 2]], at_end: bool, span: f64) -> f64 {
         sxx += (q[0] - ms) * (q[0] - ms);
         sxy += (q[0] - ms) * (q[1] - mo);
     }
-    if sxx < 1e-9 { 0.0 } else { (sxy / sxx).clamp(-0.5, 0.5) }
+    if sxx < 1e-9 {
+        0.0
+    } else {
+        (sxy / sxx).clamp(-0.5, 0.5)
+    }
 }
 
 fn seg_of(items: &[Item], members: Vec<usize>) -> Seg {
-    let mut so: Vec<[f64; 2]> = members.iter().flat_map(|&m| items[m].so.iter().copied()).collect();
+    let mut so: Vec<[f64; 2]> = members
+        .iter()
+        .flat_map(|&m| items[m].so.iter().copied())
+        .collect();
     so.sort_by(|a, b| a[0].total_cmp(&b[0]));
     let w = members.iter().map(|&m| items[m].width).sum::<f64>() / members.len() as f64;
     Seg {
@@ -308,7 +315,9 @@ pub fn grow(pieces: &[LanePiece], traj: &Trajectory, p: &Params) -> Lanes {
     let refl = RefLine::new(traj);
     let mut items: Vec<Item> = pieces
         .iter()
-        .filter(|q| matches!(q.class, MarkingClass::SolidLine | MarkingClass::DashedLine) && q.centerline.len() >= 2)
+        .filter(|q| {
+            matches!(q.class, MarkingClass::SolidLine | MarkingClass::DashedLine) && q.centerline.len() >= 2
+        })
         .filter_map(|q| {
             let mut so: Vec<[f64; 2]> = q.centerline.iter().map(|&v| refl.locate(v)).collect();
             so.sort_by(|a, b| a[0].total_cmp(&b[0]));
@@ -359,7 +368,8 @@ pub fn grow(pieces: &[LanePiece], traj: &Trajectory, p: &Params) -> Lanes {
                 LaneLineClass::SolidLine => MarkingClass::SolidLine,
                 LaneLineClass::DashedLine => MarkingClass::DashedLine,
             };
-            out.classes.extend(members.iter().map(|&m| (items[m].key, piece_class)));
+            out.classes
+                .extend(members.iter().map(|&m| (items[m].key, piece_class)));
             let start = refl.locate(line[0]);
             out.lines.push(LaneResult {
                 class,
@@ -371,8 +381,11 @@ pub fn grow(pieces: &[LanePiece], traj: &Trajectory, p: &Params) -> Lanes {
             });
         }
     }
-    out.lines
-        .sort_by(|a, b| a.start[0].total_cmp(&b.start[0]).then(a.start[1].total_cmp(&b.start[1])));
+    out.lines.sort_by(|a, b| {
+        a.start[0]
+            .total_cmp(&b.start[0])
+            .then(a.start[1].total_cmp(&b.start[1]))
+    });
     out.classes.sort_unstable_by_key(|c| c.0);
     out
 }
@@ -409,7 +422,8 @@ fn regimes(items: &[Item], chain: &[usize], p: &Params) -> Vec<(LaneLineClass, V
         // occlusion at its ends do not spoil it; an irregularly broken solid line does).
         let mut sorted = lens.clone();
         let med = geom::median(&mut sorted);
-        let regular = lens.iter().filter(|&&l| (l - med).abs() <= 0.35 * med).count() as f64 >= 0.6 * lens.len() as f64;
+        let regular =
+            lens.iter().filter(|&&l| (l - med).abs() <= 0.35 * med).count() as f64 >= 0.6 * lens.len() as f64;
         let span = runs[j].1 - runs[i].0;
         let paint = lens.iter().sum::<f64>() / span.max(1e-9);
         if lens.len() >= p.min_dashes && regular && paint <= 0.8 {
@@ -425,10 +439,19 @@ fn regimes(items: &[Item], chain: &[usize], p: &Params) -> Vec<(LaneLineClass, V
             _ => regs.push((dashed[k], r.2.clone())),
         }
     }
-    let class_of = |d: bool| if d { LaneLineClass::DashedLine } else { LaneLineClass::SolidLine };
+    let class_of = |d: bool| {
+        if d {
+            LaneLineClass::DashedLine
+        } else {
+            LaneLineClass::SolidLine
+        }
+    };
     let extent = |ms: &[usize]| {
         let a = items[ms[0]].so[0][0];
-        let b = ms.iter().map(|&m| items[m].so[items[m].so.len() - 1][0]).fold(f64::NEG_INFINITY, f64::max);
+        let b = ms
+            .iter()
+            .map(|&m| items[m].so[items[m].so.len() - 1][0])
+            .fold(f64::NEG_INFINITY, f64::max);
         b - a
     };
     if regs.len() == 1 {
@@ -466,7 +489,10 @@ fn regimes(items: &[Item], chain: &[usize], p: &Params) -> Vec<(LaneLineClass, V
 
 /// Smooth centreline through the pieces; returns the polyline and the samples' RMS residual.
 fn centreline(items: &[Item], members: &[usize], refl: &RefLine, p: &Params) -> (Vec<[f64; 2]>, f64) {
-    let mut so: Vec<[f64; 2]> = members.iter().flat_map(|&m| items[m].so.iter().copied()).collect();
+    let mut so: Vec<[f64; 2]> = members
+        .iter()
+        .flat_map(|&m| items[m].so.iter().copied())
+        .collect();
     so.sort_by(|a, b| a[0].total_cmp(&b[0]));
     let xs: Vec<f64> = so.iter().map(|q| q[0]).collect();
     let ys: Vec<f64> = so.iter().map(|q| q[1]).collect();

@@ -15,28 +15,28 @@ pub mod cluster;
 pub mod driver;
 /// Errors of the pipeline, split into fatal input errors and retryable ones.
 pub mod error;
-/// Planar geometry helpers (grid components, robust rectangles, smoothing).
-pub mod geom;
 /// GeoJSON output (and input, for truth files and evaluation).
 pub mod geojson;
+/// Planar geometry helpers (grid components, robust rectangles, smoothing).
+pub mod geom;
 /// LAS/LAZ and trajectory readers, CRS detection.
 pub mod io;
 /// Lane-line growth (part of stage 6).
 pub mod lanes;
-/// Marking outlines: rectangles, buffered centrelines, alpha shapes (part of stage 6).
-pub mod outline;
 /// The learned marking classifier (PointNet++ through ONNX Runtime).
 pub mod learned;
+/// Marking outlines: rectangles, buffered centrelines, alpha shapes (part of stage 6).
+pub mod outline;
 /// Every tunable parameter with its documented default, validated before any point is read.
 pub mod params;
 /// Stage 1: pavement extraction guided by the trajectory.
 pub mod pavement;
 /// Stage 1, alternative: the scan-line pavement method (Yao 2021).
 pub mod pavement_scanline;
-/// The smoothed trajectory frame (mileage, offset) used by classify and vectorize.
-pub mod refline;
 /// Stage 2: IDW intensity rasterisation with range/incidence normalisation.
 pub mod rasterize;
+/// The smoothed trajectory frame (mileage, offset) used by classify and vectorize.
+pub mod refline;
 /// Reprojection between the input CRS and WGS84.
 pub mod reproject;
 /// Stage 3: adaptive (integral-image) thresholding and cleanup.

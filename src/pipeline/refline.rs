@@ -122,7 +122,10 @@ impl RefLine {
         let (ta, tb) = (self.t[i], self.t[i + 1]);
         let (tx, ty) = (ta[0] + f * (tb[0] - ta[0]), ta[1] + f * (tb[1] - ta[1]));
         let l = tx.hypot(ty).max(1e-12);
-        ([a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1])], [tx / l, ty / l])
+        (
+            [a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1])],
+            [tx / l, ty / l],
+        )
     }
 
     /// The planar point at (s, o).
