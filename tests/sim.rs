@@ -334,3 +334,54 @@ fn bad_options_are_clear_errors() {
             .contains("heads")
     );
 }
+
+fn inside(ring: &[[f64; 2]], x: f64, y: f64) -> bool {
+    let mut c = false;
+    let mut j = ring.len() - 1;
+    for i in 0..ring.len() {
+        let (a, b) = (ring[i], ring[j]);
+        if (a[1] > y) != (b[1] > y) && x < (b[0] - a[0]) * (y - a[1]) / (b[1] - a[1]) + a[0] {
+            c = !c;
+        }
+        j = i;
+    }
+    c
+}
+
+#[test]
+fn labelled_points_lie_in_their_truth_polygons_and_counts_match() {
+    let dir = tempfile::tempdir().unwrap();
+    simulate(&opts("urban_intersection", 4, 15.0), dir.path()).unwrap();
+    let pts = read_points(&dir.path().join("points.las"));
+    let labels = read_labels(dir.path());
+    let t = truth(dir.path());
+    let rings: Vec<Vec<[f64; 2]>> = markings(&t)
+        .iter()
+        .map(|m| {
+            m["geometry"]["coordinates"][0]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|p| [p[0].as_f64().unwrap(), p[1].as_f64().unwrap()])
+                .collect()
+        })
+        .collect();
+    let mut counts = vec![0usize; rings.len()];
+    let (mut ok, mut n) = (0, 0);
+    for (p, &l) in pts.iter().zip(&labels) {
+        if l == 0 {
+            continue;
+        }
+        counts[l as usize - 1] += 1;
+        n += 1;
+        if inside(&rings[l as usize - 1], p.x, p.y) {
+            ok += 1;
+        }
+    }
+    assert!(n > 1000, "{n} paint points");
+    // Range noise moves a few edge points out by millimetres.
+    assert!(ok as f64 > 0.98 * n as f64, "{ok} of {n} inside");
+    for (m, c) in markings(&t).iter().zip(&counts) {
+        assert_eq!(m["properties"]["point_count"].as_u64().unwrap() as usize, *c);
+    }
+}
