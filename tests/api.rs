@@ -675,6 +675,19 @@ async fn bad_uploads_get_clear_errors_and_nothing_else_is_affected() {
         .unwrap();
     expect_error(r, 413, "payload-too-large").await;
 
+    // A form upload (curl -F) to the raw-body endpoint gets a hint instead of a stored envelope.
+    let form =
+        reqwest::multipart::Form::new().part("file", reqwest::multipart::Part::bytes(las_bytes(10, false)));
+    let r = app
+        .client
+        .post(app.url("/v1/uploads"))
+        .multipart(form)
+        .send()
+        .await
+        .unwrap();
+    let m = expect_error(r, 415, "unsupported-media-type").await;
+    assert!(m.contains("--data-binary"), "{m}");
+
     // No partial file survives; only the two good uploads are stored.
     assert!(app.files_in("tmp").is_empty(), "{:?}", app.files_in("tmp"));
     assert_eq!(app.files_in("uploads").len(), 2);
@@ -834,6 +847,13 @@ async fn bad_job_requests_are_rejected_before_enqueue() {
             .send()
             .await
             .unwrap(),
+        400,
+        "bad-request",
+    )
+    .await;
+
+    expect_error(
+        app.client.get(app.url("/v1/jobs/%FF%FE")).send().await.unwrap(),
         400,
         "bad-request",
     )

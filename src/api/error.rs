@@ -7,7 +7,7 @@
 
 use axum::Json;
 use axum::extract::multipart::{MultipartError, MultipartRejection};
-use axum::extract::rejection::{JsonRejection, PathRejection, QueryRejection};
+use axum::extract::rejection::{PathRejection, QueryRejection};
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use serde::Serialize;
@@ -31,7 +31,7 @@ pub enum ApiError {
     #[error("the upload exceeds the limit of {limit} bytes")]
     PayloadTooLarge { limit: u64 },
     /// The request's Content-Type is not accepted here.
-    #[error("unsupported content type {0:?}: send application/json or multipart/form-data")]
+    #[error("unsupported content type {0}")]
     UnsupportedMediaType(String),
     /// The content is neither LAS/LAZ nor a trajectory table.
     #[error("{0}")]
@@ -152,17 +152,6 @@ impl IntoResponse for ApiError {
 }
 
 // axum's own rejections answer in plain text; these turn them into the JSON error shape.
-
-impl From<JsonRejection> for ApiError {
-    fn from(r: JsonRejection) -> Self {
-        match r {
-            JsonRejection::JsonDataError(e) => {
-                ApiError::Unprocessable(format!("invalid JSON body: {}", e.body_text()))
-            }
-            other => ApiError::BadRequest(format!("invalid JSON body: {}", other.body_text())),
-        }
-    }
-}
 
 impl From<QueryRejection> for ApiError {
     fn from(r: QueryRejection) -> Self {

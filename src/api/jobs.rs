@@ -11,15 +11,14 @@
 
 use super::error::{ApiError, ErrorDetail};
 use super::uploads::{UploadKind, ingest};
-use super::{AppState, ErrorBody};
+use super::{ApiPath, ApiQuery, AppState, ErrorBody};
 use crate::jobs::clock::rfc3339;
 use crate::jobs::queue::{CancelOutcome, JobRecord, JobStatus, NewJob};
 use crate::pipeline::Extraction;
 use crate::pipeline::geojson::{self, CrsMode, GeoJsonError};
 use crate::pipeline::params::Params;
 use axum::Json;
-use axum::extract::rejection::QueryRejection;
-use axum::extract::{FromRequest, Multipart, Path, Query, Request, State};
+use axum::extract::{FromRequest, Multipart, Request, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use serde::{Deserialize, Serialize};
@@ -182,7 +181,9 @@ pub async fn create_job(State(state): State<AppState>, request: Request) -> Resu
         check_inputs(&state, &body.points, &body.trajectory).await?;
         enqueue(&state, body.points, body.trajectory, params).await?
     } else {
-        return Err(ApiError::UnsupportedMediaType(content_type));
+        return Err(ApiError::UnsupportedMediaType(format!(
+            "{content_type}: send application/json or multipart/form-data"
+        )));
     };
     let mut headers = HeaderMap::new();
     if let Ok(v) = HeaderValue::from_str(&job.links.self_) {
@@ -364,7 +365,10 @@ async fn create_multipart(state: &AppState, request: Request) -> Result<Job, Api
         (status = 404, description = "No such job", body = ErrorBody),
     )
 )]
-pub async fn get_job(State(state): State<AppState>, Path(id): Path<String>) -> Result<Json<Job>, ApiError> {
+pub async fn get_job(
+    State(state): State<AppState>,
+    ApiPath(id): ApiPath<String>,
+) -> Result<Json<Job>, ApiError> {
     let record = state
         .queue
         .get(&id)
@@ -386,9 +390,8 @@ pub async fn get_job(State(state): State<AppState>, Path(id): Path<String>) -> R
 )]
 pub async fn list_jobs(
     State(state): State<AppState>,
-    query: Result<Query<ListQuery>, QueryRejection>,
+    ApiQuery(q): ApiQuery<ListQuery>,
 ) -> Result<Json<JobPage>, ApiError> {
-    let Query(q) = query?;
     let limit = q.limit.unwrap_or(20);
     if !(1..=100).contains(&limit) {
         return Err(ApiError::BadRequest(format!(
@@ -426,7 +429,10 @@ pub async fn list_jobs(
         (status = 409, description = "Already succeeded or failed", body = ErrorBody),
     )
 )]
-pub async fn cancel_job(State(state): State<AppState>, Path(id): Path<String>) -> Result<Response, ApiError> {
+pub async fn cancel_job(
+    State(state): State<AppState>,
+    ApiPath(id): ApiPath<String>,
+) -> Result<Response, ApiError> {
     let (status, record) = match state.queue.cancel(&id).await? {
         CancelOutcome::Cancelled(r) => (StatusCode::OK, r),
         CancelOutcome::Requested(r) => (StatusCode::ACCEPTED, r),
@@ -459,10 +465,9 @@ pub async fn cancel_job(State(state): State<AppState>, Path(id): Path<String>) -
 )]
 pub async fn get_result(
     State(state): State<AppState>,
-    Path(id): Path<String>,
-    query: Result<Query<ResultQuery>, QueryRejection>,
+    ApiPath(id): ApiPath<String>,
+    ApiQuery(q): ApiQuery<ResultQuery>,
 ) -> Result<Response, ApiError> {
-    let Query(q) = query?;
     let record = state.queue.get(&id).await?.ok_or_else(|| ApiError::NotFound {
         what: "job",
         id: id.clone(),

@@ -38,6 +38,16 @@ use utoipa::OpenApi;
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
+/// `Path` with the API's JSON error on rejection (axum's own answers in plain text).
+#[derive(axum::extract::FromRequestParts)]
+#[from_request(via(axum::extract::Path), rejection(ApiError))]
+pub struct ApiPath<T>(pub T);
+
+/// `Query` with the API's JSON error on rejection.
+#[derive(axum::extract::FromRequestParts)]
+#[from_request(via(axum::extract::Query), rejection(ApiError))]
+pub struct ApiQuery<T>(pub T);
+
 /// Limits and defaults the handlers apply.
 #[derive(Clone, Debug)]
 pub struct ApiSettings {

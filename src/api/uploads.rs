@@ -10,7 +10,7 @@
 //! the partial file is removed. The client's `filename` is kept for display only.
 
 use super::error::ApiError;
-use super::{AppState, ErrorBody};
+use super::{ApiPath, ApiQuery, AppState, ErrorBody};
 use crate::jobs::clock::rfc3339;
 use crate::jobs::queue::UploadRecord;
 use crate::pipeline::PipelineError;
@@ -18,8 +18,7 @@ use crate::pipeline::io::{self, FileKind};
 use crate::storage::Storage;
 use axum::Json;
 use axum::body::{Body, Bytes};
-use axum::extract::rejection::QueryRejection;
-use axum::extract::{Path, Query, State};
+use axum::extract::State;
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use futures_util::{Stream, StreamExt};
 use serde::{Deserialize, Serialize};
@@ -166,11 +165,21 @@ pub struct UploadQuery {
 )]
 pub async fn create_upload(
     State(state): State<AppState>,
-    query: Result<Query<UploadQuery>, QueryRejection>,
+    ApiQuery(query): ApiQuery<UploadQuery>,
     headers: HeaderMap,
     body: Body,
 ) -> Result<(StatusCode, HeaderMap, Json<Upload>), ApiError> {
-    let Query(query) = query?;
+    // A form upload (`curl -F`) would store the multipart envelope, not the file.
+    let content_type = headers
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("");
+    if content_type.to_ascii_lowercase().starts_with("multipart/") {
+        return Err(ApiError::UnsupportedMediaType(format!(
+            "{content_type}: send the file itself as the body (curl --data-binary @FILE), \
+             or send multipart forms to POST /v1/jobs"
+        )));
+    }
     let limit = state.settings.max_upload_bytes;
     // Refuse at once what announces itself as too large (the stream check covers the rest).
     let announced = headers
@@ -201,7 +210,7 @@ pub async fn create_upload(
 )]
 pub async fn get_upload(
     State(state): State<AppState>,
-    Path(id): Path<String>,
+    ApiPath(id): ApiPath<String>,
 ) -> Result<Json<Upload>, ApiError> {
     let record = state
         .queue

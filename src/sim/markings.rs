@@ -348,8 +348,8 @@ pub fn arrow(kind: ArrowKind, frame: &Frame2, len: f64) -> MarkingDef {
     // A turning branch: 45° away from the shaft, then (nearly) square to it.
     let branch = |side: f64, j: f64| -> Vec<[f64; 2]> {
         let c = std::f64::consts::FRAC_1_SQRT_2;
-        let a = 1.2 * k;
-        let b = 0.3 * k;
+        let a = 1.0 * k;
+        let b = 0.2 * k;
         vec![
             [j, 0.0],
             [j + a * c, side * a * c],
@@ -362,7 +362,7 @@ pub fn arrow(kind: ArrowKind, frame: &Frame2, len: f64) -> MarkingDef {
             let side = if kind == ArrowKind::Left { 1.0 } else { -1.0 };
             let mut pts = vec![[0.0, 0.0]];
             pts.extend(branch(1.0, 0.55 * len));
-            let r = stroke_with_head(&pts, w, Some((0.6 * hl, hw)));
+            let r = stroke_with_head(&pts, w, Some((0.45 * hl, hw)));
             if side < 0.0 { mirror_ring(&r) } else { r }
         }
         ArrowKind::StraightLeft | ArrowKind::StraightRight => {
@@ -373,7 +373,7 @@ pub fn arrow(kind: ArrowKind, frame: &Frame2, len: f64) -> MarkingDef {
             };
             let main = stroke_with_head(&[[0.0, 0.0], [len - hl, 0.0]], w, Some((hl, hw)));
             let j = 0.3 * len;
-            let br = stroke_with_head(&branch(1.0, j), w, Some((0.6 * hl, hw)));
+            let br = stroke_with_head(&branch(1.0, j), w, Some((0.45 * hl, hw)));
             let ring = union_branch(&main, &br, w, j);
             if side < 0.0 { mirror_ring(&ring) } else { ring }
         }
@@ -483,6 +483,9 @@ impl MarkingSet {
 
     /// A solid lane line from s0 to s1.
     pub fn solid(&mut self, s0: f64, s1: f64, d: Quad, width: f64, colour: Colour) {
+        if s1 - s0 < 0.5 {
+            return; // nothing left of it within the painted stretch
+        }
         let i = self.add(band(MarkingClass::SolidLine, s0, s1, d, width, colour));
         self.lane_lines.push(LaneLineDef {
             class: LaneLineClass::SolidLine,
@@ -657,6 +660,70 @@ impl MarkingIndex {
         }
         None
     }
+}
+
+/// Keep only the markings with `counts[i] > 0` (the ones the survey saw): returns the kept
+/// markings, their counts, the lane lines restricted to kept members (their centreline
+/// clipped to the kept members' extent; lane lines left empty are dropped), and the map
+/// old index → new index.
+pub fn keep_seen(
+    markings: &[MarkingDef],
+    lanes: &[LaneLineDef],
+    counts: &[u64],
+) -> (Vec<MarkingDef>, Vec<u64>, Vec<LaneLineDef>, Vec<Option<usize>>) {
+    let mut map = vec![None; markings.len()];
+    let mut kept = Vec::new();
+    let mut kept_counts = Vec::new();
+    for (i, m) in markings.iter().enumerate() {
+        if counts[i] > 0 {
+            map[i] = Some(kept.len());
+            kept.push(m.clone());
+            kept_counts.push(counts[i]);
+        }
+    }
+    let mut out = Vec::new();
+    for l in lanes {
+        let members: Vec<usize> = l.members.iter().filter(|&&k| map[k].is_some()).copied().collect();
+        if members.is_empty() {
+            continue;
+        }
+        let path = match &l.path {
+            LanePath::Road { d, .. } => {
+                let (mut a, mut b) = (f64::INFINITY, f64::NEG_INFINITY);
+                for &k in &members {
+                    if let Paint::Band { s0, s1, .. } = markings[k].paint {
+                        a = a.min(s0);
+                        b = b.max(s1);
+                    }
+                }
+                LanePath::Road { d: *d, s0: a, s1: b }
+            }
+            LanePath::Poly(p) if p.len() == 2 => {
+                let (o, e) = (p[0], p[1]);
+                let len = (e[0] - o[0]).hypot(e[1] - o[1]);
+                let u = [(e[0] - o[0]) / len, (e[1] - o[1]) / len];
+                let (mut a, mut b) = (f64::INFINITY, f64::NEG_INFINITY);
+                for &k in &members {
+                    if let Paint::Poly { ring, .. } = &markings[k].paint {
+                        for q in ring {
+                            let t = (q[0] - o[0]) * u[0] + (q[1] - o[1]) * u[1];
+                            a = a.min(t);
+                            b = b.max(t);
+                        }
+                    }
+                }
+                let at = |t: f64| [o[0] + t * u[0], o[1] + t * u[1]];
+                LanePath::Poly(vec![at(a.max(0.0)), at(b.min(len))])
+            }
+            other => other.clone(),
+        };
+        out.push(LaneLineDef {
+            class: l.class,
+            path,
+            members: members.iter().map(|&k| map[k].expect("kept")).collect(),
+        });
+    }
+    (kept, kept_counts, out, map)
 }
 
 /// Stations at which to sample a curve from s0 to s1: every ≤ 1 m, ends exact.

@@ -253,19 +253,16 @@ pub fn simulate(opt: &SimOptions, out: &Path) -> Result<Summary> {
         .collect();
     las_out::write_trajectory(&out.join("trajectory.csv"), &rows, sc.origin, drive.t0)?;
 
-    // Truth.
+    // Truth: the markings the survey saw (at least one point on their paint), numbered in
+    // order; the labels are renumbered to match.
+    let (kept, kept_counts, lanes, map) =
+        markings::keep_seen(&sc.marks.markings, &sc.marks.lane_lines, &counts);
+    renumber_labels(&out.join("labels.bin"), &map)?;
     let crs = Crs {
         epsg: Some(u32::from(EPSG)),
         wkt: crs_definitions::from_code(EPSG).map(|d| d.wkt.to_string()),
     };
-    let ex = markings::truth(
-        road,
-        &sc.marks.markings,
-        &sc.marks.lane_lines,
-        &counts,
-        sc.origin,
-        crs,
-    );
+    let ex = markings::truth(road, &kept, &lanes, &kept_counts, sc.origin, crs);
     let gj = crate::pipeline::geojson::to_native(&ex);
     let truth_path = out.join("truth.geojson");
     std::fs::write(&truth_path, serde_json::to_vec(&gj)?)
@@ -273,7 +270,7 @@ pub fn simulate(opt: &SimOptions, out: &Path) -> Result<Summary> {
     if let Some(pv) = &preview {
         pv.write(&out.join("preview.png"))?;
     }
-    let paint_points: u64 = counts.iter().sum();
+    let paint_points: u64 = kept_counts.iter().sum();
     let summary = Summary {
         points: total,
         tiles,
@@ -295,4 +292,20 @@ pub fn simulate(opt: &SimOptions, out: &Path) -> Result<Summary> {
     });
     std::fs::write(out.join("summary.json"), serde_json::to_vec_pretty(&meta)?)?;
     Ok(summary)
+}
+
+/// Rewrite `labels.bin` with marking indices mapped through `map` (old → new, 0-based).
+fn renumber_labels(path: &Path, map: &[Option<usize>]) -> Result<()> {
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut out = Vec::with_capacity(bytes.len());
+    for c in bytes.chunks_exact(4) {
+        let l = u32::from_le_bytes([c[0], c[1], c[2], c[3]]);
+        let n = match l {
+            0 => 0,
+            k => map[k as usize - 1].map_or(0, |j| j as u32 + 1),
+        };
+        out.extend_from_slice(&n.to_le_bytes());
+    }
+    std::fs::write(path, out).with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
 }

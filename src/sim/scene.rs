@@ -231,7 +231,9 @@ fn highway(opt: &SceneOptions, rng: &mut ChaCha8Rng) -> Scene {
     let st = opt.standard;
     let len = opt.length_m.unwrap_or(250.0);
     let lw = st.lane_w_highway;
-    let (sa, sb) = (-110.0, len + 110.0);
+    let (oa, ob) = (-60.0, len + 60.0);
+    let margin = paint_margin(opt, 1);
+    let (sa, sb) = (-margin, len + margin);
     let road = Road::new(
         [0.0, 0.0],
         20f64.to_radians(),
@@ -265,7 +267,7 @@ fn highway(opt: &SceneOptions, rng: &mut ChaCha8Rng) -> Scene {
     };
     let ramp_left = ramp_right.shifted(lw);
     // The ramp lines end where they are 15 m out; the pavement keeps that width.
-    let s_re = (s_t + 80.0 * 2.0).min(sb);
+    let s_re = (s_t + 80.0 * 2.0).min(ob);
     let pave_r = move |s: f64| {
         let sc = s.min(s_re);
         if sc > s_t {
@@ -326,7 +328,7 @@ fn highway(opt: &SceneOptions, rng: &mut ChaCha8Rng) -> Scene {
         );
     }
     m.solid(sa, s_t, Quad::constant(right), st.edge_w, Colour::White);
-    m.solid(s_t, s_re, ramp_right, st.edge_w, Colour::White);
+    m.solid(s_t, s_re.min(sb), ramp_right, st.edge_w, Colour::White);
     // Exit lane separation: wide short dashes between the taper start and the gore nose.
     let (ed, eg, ew) = if st.name == "gb" {
         (3.0, 3.0, 0.45)
@@ -335,7 +337,7 @@ fn highway(opt: &SceneOptions, rng: &mut ChaCha8Rng) -> Scene {
     };
     m.dashed(&road, (s_t + 6.0, s_g), Quad::constant(right), ew, (ed, eg, 0.0));
     m.solid(s_g, sb, Quad::constant(right), st.edge_w, Colour::White);
-    m.solid(s_g, s_re, ramp_left, st.edge_w, Colour::White);
+    m.solid(s_g, s_re.min(sb), ramp_left, st.edge_w, Colour::White);
     // Gore guidelines: 45° stripes between the two edge lines, until the gore is 4 m wide.
     let lower = ramp_left.shifted(0.5 * st.edge_w);
     let upper = Quad::constant(right - 0.5 * st.edge_w);
@@ -411,8 +413,8 @@ fn highway(opt: &SceneOptions, rng: &mut ChaCha8Rng) -> Scene {
 
     // Objects.
     let mut objects = Vec::new();
-    let mut s = sa;
-    while s < sb {
+    let mut s = oa;
+    while s < ob {
         let zg = road.zc(s + 3.0);
         objects.push(barrier(
             &road,
@@ -454,13 +456,13 @@ fn highway(opt: &SceneOptions, rng: &mut ChaCha8Rng) -> Scene {
         ));
         s += 6.0;
     }
-    let mut s = sa + uniform(rng, 0.0, 40.0);
-    while s < sb {
+    let mut s = oa + uniform(rng, 0.0, 40.0);
+    while s < ob {
         objects.push(pole(&road, s, 1.05, road.zc(s) + 0.85, 11.0, 0.12));
         s += 40.0;
     }
-    let mut s = sa;
-    while s < sb {
+    let mut s = oa;
+    while s < ob {
         let d = pave_r(s) - uniform(rng, 18.0, 30.0);
         let [a, b] = tree(&road, rng, s, d, road.zc(s) - 0.8);
         objects.extend([a, b]);
@@ -535,11 +537,22 @@ fn highway(opt: &SceneOptions, rng: &mut ChaCha8Rng) -> Scene {
         drive,
         heads: Head::single(),
         origin: ORIGIN,
-        s_range: (sa - 20.0, sb + 20.0),
+        s_range: (oa - 20.0, ob + 20.0),
     }
 }
 
 /// A moving car starting somewhere in stations [lo, hi).
+/// How far beyond the ends of the drive the road is painted: the scanner sees ahead and
+/// behind only with butterfly heads. Paint stops there, so the truth (which keeps only
+/// markings that received points) has no lines running on beyond the survey.
+fn paint_margin(opt: &SceneOptions, default_heads: usize) -> f64 {
+    if opt.heads.unwrap_or(default_heads) >= 2 {
+        20.0
+    } else {
+        4.0
+    }
+}
+
 /// Wheel tracks 0.85 m either side of each lane centre.
 fn wheel_tracks(lane_centres: &[f64]) -> Vec<f64> {
     lane_centres.iter().flat_map(|&c| [c - 0.85, c + 0.85]).collect()
@@ -647,7 +660,9 @@ fn urban(name: &str, opt: &SceneOptions, rng: &mut ChaCha8Rng, style: UrbanStyle
         200.0
     });
     let lw = st.lane_w_urban;
-    let (sa, sb) = (-100.0, len + 100.0);
+    let (oa, ob) = (-60.0, len + 60.0);
+    let margin = paint_margin(opt, if style == UrbanStyle::DualHead { 2 } else { 1 });
+    let (sa, sb) = (-margin, len + margin);
     let road = Road::new(
         [0.0, 0.0],
         35f64.to_radians(),
@@ -894,9 +909,9 @@ fn urban(name: &str, opt: &SceneOptions, rng: &mut ChaCha8Rng, style: UrbanStyle
     };
     let mut objects = Vec::new();
     for side in [-1.0, 1.0] {
-        objects.extend(buildings(&road, rng, (sa, sb), face, side, &near_x));
-        let mut s = sa + uniform(rng, 0.0, 8.0);
-        while s < sb {
+        objects.extend(buildings(&road, rng, (oa, ob), face, side, &near_x));
+        let mut s = oa + uniform(rng, 0.0, 8.0);
+        while s < ob {
             if !near_x(s - 3.0, s + 3.0) {
                 let d = side * (curb + 1.0 + uniform(rng, -0.1, 0.3));
                 let zg = road.zc(s) - cross * curb + 0.15;
@@ -905,8 +920,8 @@ fn urban(name: &str, opt: &SceneOptions, rng: &mut ChaCha8Rng, style: UrbanStyle
             }
             s += uniform(rng, 7.0, 10.0);
         }
-        let mut s = sa + uniform(rng, 0.0, 25.0);
-        while s < sb {
+        let mut s = oa + uniform(rng, 0.0, 25.0);
+        while s < ob {
             if !near_x(s, s) {
                 objects.push(pole(
                     &road,
@@ -920,8 +935,8 @@ fn urban(name: &str, opt: &SceneOptions, rng: &mut ChaCha8Rng, style: UrbanStyle
             s += 28.0;
         }
         // Parked cars along the kerb over the edge line.
-        let mut s = sa + uniform(rng, 5.0, 20.0);
-        while s < sb {
+        let mut s = oa + uniform(rng, 5.0, 20.0);
+        while s < ob {
             let run = uniform(rng, 10.0, 40.0);
             let n = (run / 6.2) as usize;
             for k in 0..n {
@@ -1043,7 +1058,7 @@ fn urban(name: &str, opt: &SceneOptions, rng: &mut ChaCha8Rng, style: UrbanStyle
         drive,
         heads,
         origin: ORIGIN,
-        s_range: (sa - 20.0, sb + 20.0),
+        s_range: (oa - 20.0, ob + 20.0),
     }
 }
 
@@ -1094,7 +1109,9 @@ fn ramp(opt: &SceneOptions, rng: &mut ChaCha8Rng) -> Scene {
     let st = opt.standard;
     let len = opt.length_m.unwrap_or(200.0);
     let lw = 3.6f64.min(st.lane_w_highway);
-    let (sa, sb) = (-80.0, len + 80.0);
+    let (oa, ob) = (-60.0, len + 60.0);
+    let margin = paint_margin(opt, 1);
+    let (sa, sb) = (-margin, len + margin);
     let radius = 90.0;
     let road = Road::new(
         [20.0, -30.0],
@@ -1123,7 +1140,7 @@ fn ramp(opt: &SceneOptions, rng: &mut ChaCha8Rng) -> Scene {
     };
     let split_r = split_l.shifted(-lw);
     // The split lines end 100 m after the split (9 m apart); the deck keeps that width.
-    let s_se = (s_g + 100.0).min(sb);
+    let s_se = (s_g + 100.0).min(ob);
     let right = move |s: f64| {
         if s > s_g {
             split_r.at(s.min(s_se))
@@ -1165,9 +1182,9 @@ fn ramp(opt: &SceneOptions, rng: &mut ChaCha8Rng) -> Scene {
         (dash, gap, uniform(rng, 0.0, dash + gap)),
     );
     m.solid(s_g, sb, Quad::constant(-lw), st.edge_w, Colour::White);
-    m.solid(s_g, s_se, split_l, st.edge_w, Colour::White);
+    m.solid(s_g, s_se.min(sb), split_l, st.edge_w, Colour::White);
     m.solid(sa, s_g, Quad::constant(-2.0 * lw), st.edge_w, Colour::White);
-    m.solid(s_g, s_se, split_r, st.edge_w, Colour::White);
+    m.solid(s_g, s_se.min(sb), split_r, st.edge_w, Colour::White);
     gore_stripes(
         &mut m,
         &road,
@@ -1192,8 +1209,8 @@ fn ramp(opt: &SceneOptions, rng: &mut ChaCha8Rng) -> Scene {
     }
     // Objects: barrier segments (short, they follow the tight curve), lamp posts on them.
     let mut objects = Vec::new();
-    let mut s = sa;
-    while s < sb {
+    let mut s = oa;
+    while s < ob {
         let sm = s + 1.5;
         let pr = right(sm) - 2.5;
         let zc = road.zc(sm);
@@ -1223,14 +1240,14 @@ fn ramp(opt: &SceneOptions, rng: &mut ChaCha8Rng) -> Scene {
         ));
         s += 3.0;
     }
-    let mut s = sa;
-    while s < sb {
+    let mut s = oa;
+    while s < ob {
         objects.push(pole(&road, s, 1.05, road.zc(s) + 1.0, 10.0, 0.11));
         s += 35.0;
     }
     // Trees and buildings below the viaduct.
-    let mut s = sa;
-    while s < sb {
+    let mut s = oa;
+    while s < ob {
         let d = if rng.random_bool(0.5) {
             uniform(rng, 12.0, 30.0)
         } else {
@@ -1276,6 +1293,6 @@ fn ramp(opt: &SceneOptions, rng: &mut ChaCha8Rng) -> Scene {
         drive,
         heads: Head::single(),
         origin: ORIGIN,
-        s_range: (sa - 20.0, sb + 20.0),
+        s_range: (oa - 20.0, ob + 20.0),
     }
 }
