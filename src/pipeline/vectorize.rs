@@ -110,7 +110,7 @@ pub fn outlines(
     let abs = |p: [f64; 2]| [p[0] + o[0], p[1] + o[1]];
     candidates
         .par_iter()
-        .map(|c| {
+        .filter_map(|c| {
             let s = &c.shape;
             let drive = s.driving_direction;
             let along = if s.axis[0] * drive[0] + s.axis[1] * drive[1] < 0.0 {
@@ -175,7 +175,14 @@ pub fn outlines(
                     (ring, s.length_m, s.width_m, heading_deg(along), None)
                 }
             };
-            Piece {
+            // A degenerate outline (a cluster collapsed to a line or a point) is no painted
+            // object: it would be an invalid GeoJSON polygon, so it is dropped here.
+            let mut distinct = ring.clone();
+            distinct.dedup();
+            if distinct.len() < 3 || outline::area(&ring) < MIN_OUTLINE_AREA_M2 {
+                return None;
+            }
+            Some(Piece {
                 marking: Marking {
                     id: String::new(),
                     class: c.class,
@@ -187,10 +194,13 @@ pub fn outlines(
                     point_count: c.indices.len(),
                 },
                 centerline,
-            }
+            })
         })
         .collect()
 }
+
+/// Smallest outline area kept (m²): far below any real marking (a 0.1 m x 0.01 m sliver).
+const MIN_OUTLINE_AREA_M2: f64 = 1e-3;
 
 /// Lane lines over all pieces, lane-context class corrections, stable ids.
 pub fn assemble(pieces: Vec<Piece>, traj_abs: &Trajectory, params: &Params) -> (Vec<Marking>, Vec<LaneLine>) {
