@@ -47,7 +47,7 @@ fn test_point(i: usize, format: &Format) -> Point {
         intensity: ((i * 997) % 65_000 + 1) as u16,
         return_number: 1,
         number_of_returns: 1,
-        user_data: if i % 2 == 0 { 3 } else { 7 },
+        user_data: if i.is_multiple_of(2) { 3 } else { 7 },
         point_source_id: 12,
         scanner_channel: if format.is_extended { (i % 2) as u8 } else { 0 },
         gps_time: format.has_gps_time.then_some(400_000.0 + fi * 1e-5),
@@ -418,13 +418,20 @@ fn not_las_at_all() {
     assert!(input_error(inspect_points(dir.path())).contains("is a directory"));
 }
 
+/// A way to damage a good file's bytes.
+type Damage = fn(&mut Vec<u8>);
+
 #[test]
 fn corrupt_headers_name_the_problem() {
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("ok.las");
     write_drive(&p, &Spec::new((1, 2), 1), 10);
     let good = std::fs::read(&p).unwrap();
-    let cases: [(&str, fn(&mut Vec<u8>)); 4] = [
+    let cases: [(&str, Damage); 5] = [
+        (
+            "5 VLRs announced but VLR 1 would start inside the point data",
+            |b| b[100..104].copy_from_slice(&5u32.to_le_bytes()),
+        ),
         ("unsupported LAS version 2.2", |b| b[24] = 2),
         ("unsupported point format 11", |b| b[104] = 11),
         ("point record length 20 is shorter than format 1", |b| {

@@ -128,7 +128,7 @@ fn las_header_crs_counts_and_coordinates() {
 }
 
 #[test]
-fn every_class_appears_across_scenes_with_points() {
+fn every_class_appears_across_scenes() {
     let mut seen: BTreeSet<String> = BTreeSet::new();
     for (scene, len) in [
         ("highway", 8.0),

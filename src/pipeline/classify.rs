@@ -1,15 +1,679 @@
-//! (stage to be written: module docs give what, algorithm, parameters, reference, complexity)
+//! Stage 5: geometric classification of clusters into marking candidates.
+//!
+//! # Interface
+//! `run(&PointCloud, &[Cluster], &Trajectory, &Params) -> Vec<Candidate>` with the trajectory
+//! in the cloud's LOCAL coordinates (`Trajectory::to_local(cloud.origin)`). Each kept cluster
+//! becomes a [`Candidate`]: its point indices, a class, a confidence, its robust rectangle
+//! ([`Shape`]) and, for pieces running along the road, a centreline in the trajectory frame
+//! ([`LineGeometry`]). The learned classifier (a later module) refines `Unknown` candidates
+//! from `indices` and `shape` (local frame) without touching the rest. `assess` returns the
+//! dropped clusters too, with the reason, for debugging and `export-clusters`.
+//!
+//! # Algorithm
+//! 1. Per cluster (rayon): the robust principal-axis rectangle (length, width, fill ratio,
+//!    angle to the trajectory) and, in the (mileage, offset) frame of the smoothed
+//!    trajectory, a centreline test: per 0.5 m mileage slice the median offset; the piece is
+//!    a *line* when the residuals about that centreline are as narrow as one painted line
+//!    (≤ `line_max_width_m`) and it runs within `line_max_angle_deg` of the trajectory. The
+//!    line test works on curved pieces, where an MBR is a fat wrong rectangle.
+//! 2. Broken lines are re-joined (Pan 2019): line pieces and short narrow fragments whose
+//!    ends are ≤ `join_gap_m` apart along the trajectory, at the same offset (prediction
+//!    from the piece's slope) and of similar width are merged (mutual best match), so a
+//!    sparse far line or a worn dash is one object.
+//! 3. Rules (first match wins):
+//!    - tiny (few points or area) → dropped; compact blobs ≤ `blob_max_size_m` with aspect
+//!      < 1.6 (manhole covers, ~0.6–0.8 m round) → dropped;
+//!    - line: length ≥ `solid_min_length_m` and length/width ≥ `solid_min_ratio` (Yao 2019:
+//!      a > 7 m, a/b > 20) → `solid_line`; `dash_min_length_m` ≤ length < solid → `dashed_line`
+//!      (GB 6 m / 2 m, MUTCD 3 m, Italy 4.5 m); shorter line fragments → `unknown`;
+//!    - filled bar across the trajectory (≥ 60°), 0.15–0.65 m wide, ≥ 1.5 m long →
+//!      `stop_line`;
+//!    - filled bar along the road (≤ 25°), 0.3–0.65 m wide, 1.5–10 m long, with a parallel
+//!      neighbour stripe of similar size ≤ 2.5 m away → `crosswalk` (zebra stripes run
+//!      along the road);
+//!    - filled bar diagonal (25–65°), 0.25–0.8 m wide, with a parallel neighbour ≤ 6 m away
+//!      → `guideline` (chevron/hatch stripes);
+//!    - a thin or filled elongated shape steeper than `noise_angle_deg` (Yao 2021: 45°) to
+//!      the trajectory that matched none of the above → dropped as noise (sealant, cracks);
+//!    - everything else → `unknown` (arrows, diamonds, text: the learned classifier's job).
+//!    Lane-line context (a "dash" inside a solid lane line is an occluded solid piece) is
+//!    applied later by `vectorize`.
+//!
+//! # Parameters
+//! See [`Params`]; lengths in metres, angles in degrees.
+//!
+//! # Reference
+//! Yao et al. 2019 §2.8.1 (MBR solid-line rule); Yao et al. 2021 §2.3 and §5 (45° noise
+//! rule); Pan et al. 2019 §2.4–2.5 (bounding-box features, re-joining broken lines).
+//!
+//! # Complexity
+//! O(n log n) over the cluster points (a trajectory-frame lookup per point), O(k log k) for
+//! the re-joining and neighbour rules over k clusters.
 
+use super::cluster::Cluster;
+use super::geom::{self, BarShape};
+use super::refline::RefLine;
+use super::types::{MarkingClass, PointCloud, Trajectory};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// Parameters of this stage (JSON object `classify` in the job parameters).
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
-pub struct Params {}
+pub struct Params {
+    /// Clusters with fewer points are dropped. Default 10.
+    pub min_points: usize,
+    /// Clusters with a smaller painted area (length × width × fill, m²) are dropped.
+    /// Default 0.02.
+    pub min_area_m2: f64,
+    /// Compact blobs (both sides ≤ this, aspect < 1.6) are dropped: manhole covers and the
+    /// like. Default 1.0 m.
+    pub blob_max_size_m: f64,
+    /// Widest single painted line (m). Default 0.35 (lines are 0.10–0.25 m).
+    pub line_max_width_m: f64,
+    /// Largest angle between a line piece and the trajectory (deg). Default 20.
+    pub line_max_angle_deg: f64,
+    /// Solid-line piece: at least this long (m). Default 7 (Yao 2019: a > 7 m).
+    pub solid_min_length_m: f64,
+    /// Solid-line piece: at least this length/width ratio. Default 20 (Yao 2019: a/b > 20).
+    pub solid_min_ratio: f64,
+    /// Shortest dash (m). Default 0.8 (GB urban dashes are 2 m, worn ones shorter).
+    pub dash_min_length_m: f64,
+    /// Broken pieces of one line with ends at most this far apart are re-joined (m).
+    /// Default 0.8 (real dash gaps are ≥ 1.5 m).
+    pub join_gap_m: f64,
+    /// Elongated leftovers steeper than this to the trajectory are noise (deg). Default 45.
+    pub noise_angle_deg: f64,
+    /// Stop line width range (m). Defaults 0.15–0.65 (GB 0.2–0.4, MUTCD 0.3–0.6).
+    pub stop_min_width_m: f64,
+    pub stop_max_width_m: f64,
+    /// Crosswalk stripe width range (m). Defaults 0.3–0.65 (GB 0.40–0.45, MUTCD 0.3–0.6).
+    pub crosswalk_min_width_m: f64,
+    pub crosswalk_max_width_m: f64,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Self {
+            min_points: 10,
+            min_area_m2: 0.02,
+            blob_max_size_m: 1.0,
+            line_max_width_m: 0.35,
+            line_max_angle_deg: 20.0,
+            solid_min_length_m: 7.0,
+            solid_min_ratio: 20.0,
+            dash_min_length_m: 0.8,
+            join_gap_m: 0.8,
+            noise_angle_deg: 45.0,
+            stop_min_width_m: 0.15,
+            stop_max_width_m: 0.65,
+            crosswalk_min_width_m: 0.3,
+            crosswalk_max_width_m: 0.65,
+        }
+    }
+}
 
 impl Params {
     /// Check every field; the message names the offending parameter.
     pub fn validate(&self) -> Result<(), String> {
+        let pos = [
+            ("min_area_m2", self.min_area_m2, 0.0, 10.0),
+            ("blob_max_size_m", self.blob_max_size_m, 0.0, 5.0),
+            ("line_max_width_m", self.line_max_width_m, 0.01, 2.0),
+            ("line_max_angle_deg", self.line_max_angle_deg, 0.0, 60.0),
+            ("solid_min_length_m", self.solid_min_length_m, 0.1, 100.0),
+            ("solid_min_ratio", self.solid_min_ratio, 1.0, 1000.0),
+            ("dash_min_length_m", self.dash_min_length_m, 0.0, 50.0),
+            ("join_gap_m", self.join_gap_m, 0.0, 10.0),
+            ("noise_angle_deg", self.noise_angle_deg, 0.0, 90.0),
+            ("stop_min_width_m", self.stop_min_width_m, 0.0, 5.0),
+            ("stop_max_width_m", self.stop_max_width_m, 0.0, 5.0),
+            ("crosswalk_min_width_m", self.crosswalk_min_width_m, 0.0, 5.0),
+            ("crosswalk_max_width_m", self.crosswalk_max_width_m, 0.0, 5.0),
+        ];
+        for (name, v, lo, hi) in pos {
+            if !(v >= lo && v <= hi) {
+                return Err(format!("{name} must be in [{lo}, {hi}], got {v}"));
+            }
+        }
+        if self.min_points == 0 {
+            return Err("min_points must be at least 1".into());
+        }
+        if self.dash_min_length_m >= self.solid_min_length_m {
+            return Err("dash_min_length_m must be below solid_min_length_m".into());
+        }
+        if self.stop_min_width_m > self.stop_max_width_m {
+            return Err("stop_min_width_m must not exceed stop_max_width_m".into());
+        }
+        if self.crosswalk_min_width_m > self.crosswalk_max_width_m {
+            return Err("crosswalk_min_width_m must not exceed crosswalk_max_width_m".into());
+        }
         Ok(())
+    }
+}
+
+/// Robust rectangle and shape features of a cluster (local coordinates).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Shape {
+    /// Centre of the robust rectangle.
+    pub center: [f64; 2],
+    /// Unit long axis (canonical sign: x > 0).
+    pub axis: [f64; 2],
+    pub length_m: f64,
+    pub width_m: f64,
+    /// Mean slice width over the rectangle width: ~1 for bars, ~0.5 for triangles.
+    pub fill_ratio: f64,
+    /// Acute angle between the long axis and the trajectory (deg, 0..=90).
+    pub angle_to_trajectory_deg: f64,
+    /// Station of the centre in the smoothed trajectory frame.
+    pub mileage_m: f64,
+    pub offset_m: f64,
+    /// Unit driving direction at the centre's station.
+    pub driving_direction: [f64; 2],
+    /// Median nearest-neighbour point spacing (m).
+    pub spacing_m: f64,
+    pub point_count: usize,
+    pub mean_intensity: f32,
+}
+
+impl Shape {
+    /// The four rectangle corners (local coordinates).
+    pub fn corners(&self) -> [[f64; 2]; 4] {
+        let (a, c) = (self.axis, self.center);
+        let (hl, hw) = (self.length_m / 2.0, self.width_m / 2.0);
+        let f = |u: f64, v: f64| [c[0] + u * a[0] - v * a[1], c[1] + u * a[1] + v * a[0]];
+        [f(-hl, -hw), f(hl, -hw), f(hl, hw), f(-hl, hw)]
+    }
+}
+
+/// Centreline of a piece running along the road (local coordinates).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct LineGeometry {
+    /// Vertices ordered by increasing mileage, about 0.5 m apart.
+    pub centerline: Vec<[f64; 2]>,
+    /// (mileage, offset) of each vertex in the smoothed trajectory frame.
+    pub stations: Vec<[f64; 2]>,
+    /// Painted width (robust extent of the residuals about the centreline).
+    pub width_m: f64,
+    /// Length along the centreline.
+    pub length_m: f64,
+    /// Largest distance of the centreline from its chord: > a few cm means curved.
+    pub sagitta_m: f64,
+}
+
+/// A classified cluster.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Candidate {
+    /// Indices into the marking cloud (several clusters when re-joined), sorted.
+    pub indices: Vec<usize>,
+    pub class: MarkingClass,
+    /// 0..1: how clearly the geometry matched the class's rule.
+    pub confidence: f64,
+    pub shape: Shape,
+    /// Present for pieces running along the road (lane-line material).
+    pub line: Option<LineGeometry>,
+}
+
+/// Why a cluster was dropped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DropReason {
+    Tiny,
+    Blob,
+    SteepNoise,
+}
+
+/// Classify clusters; only kept candidates are returned, in a deterministic order (by
+/// mileage, then offset).
+pub fn run(cloud: &PointCloud, clusters: &[Cluster], traj: &Trajectory, params: &Params) -> Vec<Candidate> {
+    assess(cloud, clusters, traj, params)
+        .into_iter()
+        .filter_map(|(c, d)| d.is_none().then_some(c))
+        .collect()
+}
+
+/// Like [`run`] but also returns the dropped candidates with the reason.
+pub fn assess(
+    cloud: &PointCloud,
+    clusters: &[Cluster],
+    traj: &Trajectory,
+    params: &Params,
+) -> Vec<(Candidate, Option<DropReason>)> {
+    let refl = RefLine::new(traj);
+    let xy: Vec<[f64; 2]> = cloud.x.iter().zip(&cloud.y).map(|(&x, &y)| [x, y]).collect();
+    let groups: Vec<Vec<usize>> = clusters.iter().map(|c| c.indices.clone()).collect();
+    let feats: Vec<Candidate> = groups
+        .into_par_iter()
+        .map(|g| describe(&xy, &cloud.intensity, g, &refl, params))
+        .collect();
+    let feats = rejoin(feats, &xy, &cloud.intensity, &refl, params);
+    let mut out: Vec<(Candidate, Option<DropReason>)> = feats.into_iter().map(|c| rule(c, params)).collect();
+    confirm_groups(&mut out);
+    out.sort_by(|a, b| {
+        a.0.shape
+            .mileage_m
+            .total_cmp(&b.0.shape.mileage_m)
+            .then(a.0.shape.offset_m.total_cmp(&b.0.shape.offset_m))
+            .then(a.0.indices.first().cmp(&b.0.indices.first()))
+    });
+    out
+}
+
+/// Features of one group of points; class left `Unknown` (rules come later).
+fn describe(
+    xy: &[[f64; 2]],
+    intensity: &[f32],
+    mut idx: Vec<usize>,
+    refl: &RefLine,
+    p: &Params,
+) -> Candidate {
+    idx.sort_unstable();
+    let pts: Vec<[f64; 2]> = idx.iter().map(|&i| xy[i]).collect();
+    let bar = BarShape::of(&pts);
+    let center = bar.center();
+    let [ms, mo] = refl.locate(center);
+    let dir = refl.direction(ms);
+    let spacing = geom::spacing(&pts, 1.0).unwrap_or(0.05);
+    let mean_intensity = if idx.is_empty() {
+        0.0
+    } else {
+        (idx.iter()
+            .map(|&i| intensity.get(i).copied().unwrap_or(0.0) as f64)
+            .sum::<f64>()
+            / idx.len() as f64) as f32
+    };
+    let shape = Shape {
+        center,
+        axis: bar.pca.axis,
+        length_m: bar.length(),
+        width_m: bar.width(),
+        fill_ratio: bar.fill,
+        angle_to_trajectory_deg: geom::acute_angle_deg(bar.pca.axis, dir),
+        mileage_m: ms,
+        offset_m: mo,
+        driving_direction: dir,
+        spacing_m: spacing,
+        point_count: idx.len(),
+        mean_intensity,
+    };
+    let line = line_geometry(&pts, refl, p);
+    Candidate {
+        indices: idx,
+        class: MarkingClass::Unknown,
+        confidence: 0.0,
+        shape,
+        line,
+    }
+}
+
+/// The trajectory-frame centreline test (see the module docs).
+fn line_geometry(pts: &[[f64; 2]], refl: &RefLine, p: &Params) -> Option<LineGeometry> {
+    if pts.len() < 4 {
+        return None;
+    }
+    let mut so: Vec<[f64; 2]> = pts.iter().map(|&q| refl.locate(q)).collect();
+    so.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+    let (s_lo, s_hi) = (so[0][0], so[so.len() - 1][0]);
+    let ext = s_hi - s_lo;
+    if ext < 0.3 {
+        return None;
+    }
+    let ds = (ext / 4.0).clamp(0.1, 0.5);
+    let ns = (ext / ds).ceil().max(1.0) as usize;
+    let mut slices: Vec<Vec<f64>> = vec![Vec::new(); ns];
+    let mut slice_s: Vec<f64> = vec![0.0; ns];
+    for q in &so {
+        let k = (((q[0] - s_lo) / ds) as usize).min(ns - 1);
+        slices[k].push(q[1]);
+        slice_s[k] += q[0];
+    }
+    let (mut ks, mut ko, mut kw) = (Vec::new(), Vec::new(), Vec::new());
+    for k in 0..ns {
+        let n = slices[k].len();
+        if n >= 2 || (n == 1 && ns <= 4) {
+            ks.push(slice_s[k] / n as f64);
+            ko.push(geom::median(&mut slices[k]));
+            kw.push(n as f64);
+        }
+    }
+    if ks.len() < 2 {
+        return None;
+    }
+    // Smooth offsets of the slice medians; the residuals of all points give the width.
+    let h = (2.0 * ds).max(0.5);
+    let fit = |s: f64| geom::local_linear(&ks, &ko, &kw, s, h, 2.0).unwrap_or((0.0, 0.0));
+    let mut resid: Vec<f64> = Vec::with_capacity(so.len());
+    let mut slope_sum = 0.0;
+    for &k in &ks {
+        slope_sum += fit(k).1;
+    }
+    let slope = slope_sum / ks.len() as f64;
+    let cosang = 1.0 / (1.0 + slope * slope).sqrt();
+    // Fitted offsets at the slice centres, interpolated for the residuals.
+    let fo: Vec<f64> = ks.iter().map(|&s| fit(s).0).collect();
+    for q in &so {
+        let j = ks.partition_point(|&s| s < q[0]);
+        let c = if j == 0 {
+            fo[0]
+        } else if j >= ks.len() {
+            fo[ks.len() - 1]
+        } else {
+            let f = (q[0] - ks[j - 1]) / (ks[j] - ks[j - 1]).max(1e-9);
+            fo[j - 1] + f * (fo[j] - fo[j - 1])
+        };
+        resid.push(q[1] - c);
+    }
+    resid.sort_unstable_by(f64::total_cmp);
+    let (r0, r1) = geom::robust_extent(&resid);
+    let width = (r1 - r0) * cosang;
+    if width > p.line_max_width_m || ext * cosang < 3.0 * width.max(0.05) {
+        return None;
+    }
+    let angle = slope.abs().atan().to_degrees();
+    // Local angles too: a piece bending across the road is not a lane line.
+    if angle > p.line_max_angle_deg
+        || ks
+            .iter()
+            .any(|&s| fit(s).1.abs().atan().to_degrees() > p.line_max_angle_deg + 10.0)
+    {
+        return None;
+    }
+    // Ends: the first/last points, ignoring a lone stray beyond a slice gap.
+    let first = (0..ns).find(|&k| slices[k].len() >= 2).unwrap_or(0);
+    let last = (0..ns).rev().find(|&k| slices[k].len() >= 2).unwrap_or(ns - 1);
+    let s0 = so
+        .iter()
+        .map(|q| q[0])
+        .find(|&s| s >= s_lo + first as f64 * ds)
+        .unwrap_or(s_lo);
+    let s1 = so
+        .iter()
+        .rev()
+        .map(|q| q[0])
+        .find(|&s| s <= s_lo + (last + 1) as f64 * ds)
+        .unwrap_or(s_hi);
+    let mut stations: Vec<[f64; 2]> = vec![[s0, fit(s0).0]];
+    let nv = ((s1 - s0) / 0.5).ceil().max(1.0) as usize;
+    for i in 1..nv {
+        let s = s0 + (s1 - s0) * i as f64 / nv as f64;
+        stations.push([s, fit(s).0]);
+    }
+    stations.push([s1, fit(s1).0]);
+    let centerline: Vec<[f64; 2]> = stations.iter().map(|st| refl.point(st[0], st[1])).collect();
+    let length = geom::polyline_length(&centerline);
+    let (a, b) = (centerline[0], centerline[centerline.len() - 1]);
+    let chord = (b[0] - a[0]).hypot(b[1] - a[1]).max(1e-9);
+    let sagitta = centerline
+        .iter()
+        .map(|q| ((q[0] - a[0]) * (b[1] - a[1]) - (q[1] - a[1]) * (b[0] - a[0])).abs() / chord)
+        .fold(0.0, f64::max);
+    Some(LineGeometry {
+        centerline,
+        stations,
+        width_m: width,
+        length_m: length,
+        sagitta_m: sagitta,
+    })
+}
+
+/// Summary of a piece for re-joining: ends and offsets in the trajectory frame.
+struct End {
+    s0: f64,
+    s1: f64,
+    o0: f64,
+    o1: f64,
+    slope: f64,
+    width: f64,
+}
+
+fn piece_end(c: &Candidate, p: &Params) -> Option<End> {
+    if let Some(l) = &c.line {
+        let (a, b) = (l.stations[0], l.stations[l.stations.len() - 1]);
+        let slope = if b[0] - a[0] > 1e-6 {
+            (b[1] - a[1]) / (b[0] - a[0])
+        } else {
+            0.0
+        };
+        return Some(End {
+            s0: a[0],
+            s1: b[0],
+            o0: a[1],
+            o1: b[1],
+            slope,
+            width: l.width_m,
+        });
+    }
+    // A short narrow fragment (too short for the line test) may still belong to a line.
+    let s = &c.shape;
+    if s.length_m <= 1.5 && s.width_m <= p.line_max_width_m && s.point_count >= 3 {
+        let half = s.length_m / 2.0 * (1.0 - s.angle_to_trajectory_deg.to_radians().sin()).max(0.3);
+        return Some(End {
+            s0: s.mileage_m - half,
+            s1: s.mileage_m + half,
+            o0: s.offset_m,
+            o1: s.offset_m,
+            slope: 0.0,
+            width: s.width_m.min(s.length_m),
+        });
+    }
+    None
+}
+
+/// Merge broken pieces of one line (mutual best successor within `join_gap_m`).
+fn rejoin(
+    feats: Vec<Candidate>,
+    xy: &[[f64; 2]],
+    intensity: &[f32],
+    refl: &RefLine,
+    p: &Params,
+) -> Vec<Candidate> {
+    if p.join_gap_m <= 0.0 {
+        return feats;
+    }
+    let ends: Vec<Option<End>> = feats.iter().map(|c| piece_end(c, p)).collect();
+    let mut order: Vec<usize> = (0..feats.len()).filter(|&i| ends[i].is_some()).collect();
+    order.sort_by(|&a, &b| {
+        let (ea, eb) = (ends[a].as_ref().expect("end"), ends[b].as_ref().expect("end"));
+        ea.s0.total_cmp(&eb.s0).then(a.cmp(&b))
+    });
+    let cost = |a: usize, b: usize| -> Option<f64> {
+        let (ea, eb) = (ends[a].as_ref()?, ends[b].as_ref()?);
+        let gap = eb.s0 - ea.s1;
+        if gap < -0.2 || gap > p.join_gap_m {
+            return None;
+        }
+        let pred = ea.o1 + ea.slope * gap.max(0.0);
+        let dev = (eb.o0 - pred).abs();
+        let wmax = ea.width.max(eb.width).max(0.05);
+        let tol = 0.5 * wmax + 0.03;
+        if dev > tol
+            || ea.width.min(eb.width) < 0.4 * wmax && feats[a].line.is_some() && feats[b].line.is_some()
+        {
+            return None;
+        }
+        Some(dev / tol + gap.max(0.0) / p.join_gap_m)
+    };
+    // Candidate successors are the next pieces in mileage order (window bounded by the gap).
+    let n = feats.len();
+    let mut best_next: Vec<Option<(f64, usize)>> = vec![None; n];
+    let mut best_prev: Vec<Option<(f64, usize)>> = vec![None; n];
+    for (oi, &a) in order.iter().enumerate() {
+        let ea = ends[a].as_ref().expect("end");
+        for &b in &order[oi + 1..] {
+            let eb = ends[b].as_ref().expect("end");
+            if eb.s0 > ea.s1 + p.join_gap_m {
+                break;
+            }
+            if let Some(c) = cost(a, b) {
+                if best_next[a].is_none_or(|(bc, _)| c < bc) {
+                    best_next[a] = Some((c, b));
+                }
+                if best_prev[b].is_none_or(|(bc, _)| c < bc) {
+                    best_prev[b] = Some((c, a));
+                }
+            }
+        }
+    }
+    let mut parent: Vec<usize> = (0..n).collect();
+    fn find(p: &mut [usize], mut a: usize) -> usize {
+        while p[a] != a {
+            p[a] = p[p[a]];
+            a = p[a];
+        }
+        a
+    }
+    let mut merged_any = false;
+    for a in 0..n {
+        if let Some((_, b)) = best_next[a] {
+            if best_prev[b].map(|x| x.1) == Some(a) {
+                let (ra, rb) = (find(&mut parent, a), find(&mut parent, b));
+                parent[ra.max(rb)] = ra.min(rb);
+                merged_any = true;
+            }
+        }
+    }
+    if !merged_any {
+        return feats;
+    }
+    let mut groups: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
+    for i in 0..n {
+        let r = find(&mut parent, i);
+        groups.entry(r).or_default().push(i);
+    }
+    let mut slots: Vec<Option<Candidate>> = feats.into_iter().map(Some).collect();
+    let (single, multi): (Vec<Vec<usize>>, Vec<Vec<usize>>) =
+        groups.into_values().partition(|g| g.len() == 1);
+    let mut out: Vec<Candidate> = single
+        .into_iter()
+        .map(|g| slots[g[0]].take().expect("each candidate once"))
+        .collect();
+    let merged: Vec<Vec<usize>> = multi
+        .into_iter()
+        .map(|g| {
+            g.into_iter()
+                .flat_map(|i| slots[i].take().expect("each candidate once").indices)
+                .collect()
+        })
+        .collect();
+    let described: Vec<Candidate> = merged
+        .into_par_iter()
+        .map(|idx| describe(xy, intensity, idx, refl, p))
+        .collect();
+    out.extend(described);
+    out
+}
+
+/// Membership of `v` in [lo, hi] with soft shoulders: 1 well inside, falling to 0.5 at the
+/// bounds.
+fn inside(v: f64, lo: f64, hi: f64) -> f64 {
+    let span = (hi - lo).max(1e-9);
+    let m = ((v - lo).min(hi - v) / (0.25 * span)).clamp(0.0, 1.0);
+    0.5 + 0.5 * m
+}
+
+/// Apply the rules to one described candidate.
+fn rule(mut c: Candidate, p: &Params) -> (Candidate, Option<DropReason>) {
+    let s = &c.shape;
+    let area = s.length_m * s.width_m * s.fill_ratio;
+    if s.point_count < p.min_points || area < p.min_area_m2 {
+        return (c, Some(DropReason::Tiny));
+    }
+    let aspect = s.length_m / s.width_m.max(1e-3);
+    if let Some(l) = &c.line {
+        // Narrower than any painted line: a sliver or a single row of points.
+        if l.width_m < 0.05 {
+            c.class = MarkingClass::Unknown;
+            c.confidence = 0.2;
+            return (c, None);
+        }
+        if l.width_m <= p.line_max_width_m {
+            let ratio = l.length_m / l.width_m.max(0.05);
+            let wq = inside(l.width_m, 0.06, p.line_max_width_m);
+            if l.length_m >= p.solid_min_length_m && ratio >= p.solid_min_ratio {
+                c.class = MarkingClass::SolidLine;
+                c.confidence = (0.75 + 0.25 * (l.length_m / (2.0 * p.solid_min_length_m)).min(1.0)) * wq;
+            } else if l.length_m >= p.dash_min_length_m {
+                c.class = MarkingClass::DashedLine;
+                c.confidence = 0.85 * wq * (0.7 + 0.3 * s.fill_ratio.min(1.0));
+            } else {
+                c.class = MarkingClass::Unknown;
+                c.confidence = 0.3;
+            }
+            return (c, None);
+        }
+    }
+    if s.length_m <= p.blob_max_size_m && aspect < 1.6 {
+        return (c, Some(DropReason::Blob));
+    }
+    let bar = s.fill_ratio >= 0.65 && aspect >= 2.5;
+    let ang = s.angle_to_trajectory_deg;
+    if bar
+        && ang >= 60.0
+        && s.width_m >= p.stop_min_width_m
+        && s.width_m <= p.stop_max_width_m
+        && s.length_m >= 1.5
+    {
+        c.class = MarkingClass::StopLine;
+        c.confidence = 0.8
+            * inside(s.width_m, p.stop_min_width_m, p.stop_max_width_m)
+            * inside(ang, 45.0, 135.0).max(0.8);
+        return (c, None);
+    }
+    if bar
+        && ang <= 25.0
+        && s.width_m >= p.crosswalk_min_width_m
+        && s.width_m <= p.crosswalk_max_width_m
+        && (1.5..=10.0).contains(&s.length_m)
+    {
+        // Confirmed by a neighbour stripe in `confirm_groups`; `Crosswalk` marks the candidate.
+        c.class = MarkingClass::Crosswalk;
+        c.confidence = 0.8 * inside(s.width_m, p.crosswalk_min_width_m, p.crosswalk_max_width_m);
+        return (c, None);
+    }
+    if bar && ang > 25.0 && ang < 65.0 && (0.25..=0.8).contains(&s.width_m) && s.length_m >= 1.0 {
+        c.class = MarkingClass::Guideline;
+        c.confidence = 0.7;
+        return (c, None);
+    }
+    if aspect >= 3.0 && ang > p.noise_angle_deg && (s.fill_ratio >= 0.5 || s.width_m < 0.12) {
+        return (c, Some(DropReason::SteepNoise));
+    }
+    c.class = MarkingClass::Unknown;
+    c.confidence = 0.4;
+    (c, None)
+}
+
+/// Crosswalk and guideline stripes need a parallel neighbour of similar size; lone ones
+/// become `unknown` (or noise when steep).
+fn confirm_groups(items: &mut [(Candidate, Option<DropReason>)]) {
+    let kinds = [MarkingClass::Crosswalk, MarkingClass::Guideline];
+    let mut verdict: Vec<Option<bool>> = vec![None; items.len()];
+    for kind in kinds {
+        let idx: Vec<usize> = (0..items.len())
+            .filter(|&i| items[i].1.is_none() && items[i].0.class == kind)
+            .collect();
+        let max_d = if kind == MarkingClass::Crosswalk { 2.5 } else { 6.0 };
+        for &i in &idx {
+            let a = &items[i].0.shape;
+            let ok = idx.iter().any(|&j| {
+                let b = &items[j].0.shape;
+                j != i
+                    && (a.center[0] - b.center[0]).hypot(a.center[1] - b.center[1]) <= max_d
+                    && geom::acute_angle_deg(a.axis, b.axis) <= 10.0
+                    && a.width_m.min(b.width_m) >= 0.6 * a.width_m.max(b.width_m)
+                    && a.length_m.min(b.length_m) >= 0.5 * a.length_m.max(b.length_m)
+            });
+            verdict[i] = Some(ok);
+        }
+    }
+    for (i, v) in verdict.into_iter().enumerate() {
+        if v == Some(false) {
+            let (c, d) = &mut items[i];
+            if c.class == MarkingClass::Guideline && c.shape.angle_to_trajectory_deg > 45.0 {
+                *d = Some(DropReason::SteepNoise);
+            }
+            c.class = MarkingClass::Unknown;
+            c.confidence = 0.4;
+        }
     }
 }

@@ -5,22 +5,38 @@
 //! The service and the CLI call [`run`] once per job, on a rayon pool, and follow it
 //! through a [`Progress`] callback.
 
+/// Chunking along the trajectory (bounded memory), with spill files.
+pub mod chunk;
 /// Stage 5: geometric (and learned) classification of clusters.
 pub mod classify;
 /// Stage 4: Euclidean clustering of marking points.
 pub mod cluster;
+/// The driver behind [`run`]: chunk loop, streaming clusters, statistics.
+pub mod driver;
 /// Errors of the pipeline, split into fatal input errors and retryable ones.
 pub mod error;
 /// GeoJSON output (and input, for truth files and evaluation).
 pub mod geojson;
+/// Planar geometry helpers (grid components, robust rectangles, smoothing).
+pub mod geom;
 /// LAS/LAZ and trajectory readers, CRS detection.
 pub mod io;
+/// Lane-line growth (part of stage 6).
+pub mod lanes;
+/// The learned marking classifier (PointNet++ through ONNX Runtime).
+pub mod learned;
+/// Marking outlines: rectangles, buffered centrelines, alpha shapes (part of stage 6).
+pub mod outline;
 /// Every tunable parameter with its documented default, validated before any point is read.
 pub mod params;
 /// Stage 1: pavement extraction guided by the trajectory.
 pub mod pavement;
+/// Stage 1, alternative: the scan-line pavement method (Yao 2021).
+pub mod pavement_scanline;
 /// Stage 2: IDW intensity rasterisation with range/incidence normalisation.
 pub mod rasterize;
+/// The smoothed trajectory frame (mileage, offset) used by classify and vectorize.
+pub mod refline;
 /// Reprojection between the input CRS and WGS84.
 pub mod reproject;
 /// Stage 3: adaptive (integral-image) thresholding and cleanup.
@@ -59,13 +75,14 @@ pub struct Inputs {
 }
 
 /// Run the whole pipeline on the files of one job.
+///
+/// Stages report progress under the stable names of [`driver::STAGES`] and the job can be
+/// cancelled at every stage boundary. Memory stays bounded by a chunk of the drive
+/// (`params.chunk`), see [`driver`] and [`chunk`].
 pub fn run(
     inputs: &Inputs,
     params: &params::ValidParams,
     progress: &dyn Progress,
 ) -> Result<Extraction, PipelineError> {
-    let _ = (inputs, params, progress);
-    Err(PipelineError::Internal(
-        "the pipeline is not assembled yet".into(),
-    ))
+    driver::run_with_stats(inputs, params, progress).map(|(ex, _)| ex)
 }

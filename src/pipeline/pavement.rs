@@ -1,15 +1,673 @@
-//! (stage to be written: module docs give what, algorithm, parameters, reference, complexity)
+//! Stage 1: pavement extraction guided by the trajectory.
+//!
+//! **What.** Keeps the points of the drivable road surface and drops curbs, sidewalks,
+//! vehicles, vegetation and everything else, so the later stages see only asphalt and paint.
+//!
+//! **Algorithm** (`method: "slices"`, the default; Yao et al. 2019 § 2.1–2.4). Points are
+//! located on the trajectory (mileage along it, signed lateral offset `u` from it) and cut
+//! into slices of `slice_length_m` by mileage; each slice is its own cross-section
+//! (`u` across, z up). Per slice:
+//! 1. *Pseudo scan line*: the lowest point of every `pseudo_bin_m` interval of `u` (the
+//!    paper's § 2.3), taken separately in sub-slices of 0.5 m so that the longitudinal
+//!    grade can be fitted too.
+//! 2. *RANSAC* (`ransac_iterations`, `ransac_tolerance_m`, seeded per slice from `seed` and
+//!    the global slice index) fits the plane `z = a + b·u + c·s` to the pseudo points
+//!    (the paper fits a line; the `c·s` grade term keeps a 2 m slice on a 5 % slope from
+//!    looking 10 cm thick), refined by least squares on its inliers. Points whose height
+//!    above that plane lies outside `[-buffer_below_m, buffer_above_m]` are dropped
+//!    (the paper's road-surface buffer).
+//! 3. *Moving-window cut* (§ 2.4): windows of `window_m` across the road, walked outward
+//!    from the trajectory on both sides. A window's level is its 10 % height quantile and
+//!    its thickness the 10–90 % range. A flat window (thickness ≤ the road thickness)
+//!    becomes the new reference level and keeps its points near that level. A thick
+//!    window (a "key window", eq. 7) is either an object on the road — the surface beyond
+//!    it comes back to the reference level: keep its points at road level (eq. 9) — or the
+//!    road edge: the points above the reference level mark the curb and everything from the
+//!    innermost of them outward is cut (eq. 8); the walk stops. A window whose level steps
+//!    by more than the road thickness (plus `max_cross_slope` times the distance) also ends
+//!    the road, and so does a gap without points wider than `max_gap_m`. The road thickness
+//!    is `road_thickness_m`, raised to 1.5 × the median window thickness of the slice when
+//!    the scanner is noisier than that.
+//!
+//! Nothing depends on the order of the points, so interleaved scanner heads are fine.
+//!
+//! `method: "scan_lines"` is the scan-line method of Yao et al. 2021 (see
+//! [`super::pavement_scanline`]) for single-head data in acquisition order;
+//! `method: "none"` keeps every point (input already cut to the road).
+//!
+//! **Parameters** ([`Params`], defaults): `slice_length_m` 2.0 (paper D), `pseudo_bin_m`
+//! 0.05 (paper W), `ransac_iterations` 200, `ransac_tolerance_m` 0.04, `buffer_below_m`
+//! 0.3, `buffer_above_m` 0.3, `window_m` 0.4 (paper), `road_thickness_m` 0.06,
+//! `max_cross_slope` 0.1, `max_gap_m` 3.0, `max_offset_m` 30, `seed` 0.
+//!
+//! **Reference.** Yao L., Qin C., Chen Q., Wu H., Zhang S. (2019) Automatic extraction and
+//! recognition of road markings based on vehicle laser point cloud, ISPRS Archives.
+//!
+//! **Complexity.** O(n log n) overall (quantiles per window), parallel over slices; RANSAC
+//! stops adaptively once the inlier ratio makes a better plane unlikely.
 
+use super::pavement_scanline;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+/// Which pavement method runs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    /// Mileage slices + RANSAC + moving window (Yao 2019). Order-independent.
+    #[default]
+    Slices,
+    /// Scan lines from acquisition order (Yao 2021). Single head, points in order.
+    ScanLines,
+    /// Keep every point.
+    None,
+}
+
 /// Parameters of this stage (JSON object `pavement` in the job parameters).
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
-pub struct Params {}
+pub struct Params {
+    pub method: Method,
+    /// Slice length along the trajectory (m). Paper D = 2.
+    pub slice_length_m: f64,
+    /// Interval of the pseudo scan line across the road (m). Paper W = 0.05.
+    pub pseudo_bin_m: f64,
+    /// Maximum RANSAC iterations per slice.
+    pub ransac_iterations: u32,
+    /// RANSAC inlier distance (m).
+    pub ransac_tolerance_m: f64,
+    /// Buffer below / above the fitted road plane (m).
+    pub buffer_below_m: f64,
+    pub buffer_above_m: f64,
+    /// Moving-window width across the road (m). Paper: 0.4.
+    pub window_m: f64,
+    /// Height range above which a window holds more than road surface (m).
+    pub road_thickness_m: f64,
+    /// Allowed change of cross slope between windows (m per m).
+    pub max_cross_slope: f64,
+    /// Widest gap without points that the road may continue across (m).
+    pub max_gap_m: f64,
+    /// Points farther than this from the trajectory are never road (m).
+    pub max_offset_m: f64,
+    /// Seed of the per-slice RANSAC generators.
+    pub seed: u64,
+    /// Parameters of the scan-line method (`method: "scan_lines"`).
+    pub scan_lines: pavement_scanline::Params,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Self {
+            method: Method::Slices,
+            slice_length_m: 2.0,
+            pseudo_bin_m: 0.05,
+            ransac_iterations: 200,
+            ransac_tolerance_m: 0.04,
+            buffer_below_m: 0.3,
+            buffer_above_m: 0.3,
+            window_m: 0.4,
+            road_thickness_m: 0.06,
+            max_cross_slope: 0.1,
+            max_gap_m: 3.0,
+            max_offset_m: 30.0,
+            seed: 0,
+            scan_lines: pavement_scanline::Params::default(),
+        }
+    }
+}
+
+pub(crate) fn check_range(name: &str, v: f64, lo: f64, hi: f64) -> Result<(), String> {
+    if v.is_finite() && v >= lo && v <= hi {
+        Ok(())
+    } else {
+        Err(format!("{name}: must be within {lo}..={hi}, got {v}"))
+    }
+}
 
 impl Params {
     /// Check every field; the message names the offending parameter.
     pub fn validate(&self) -> Result<(), String> {
-        Ok(())
+        check_range("slice_length_m", self.slice_length_m, 0.1, 50.0)?;
+        check_range("pseudo_bin_m", self.pseudo_bin_m, 0.005, 1.0)?;
+        if !(1..=100_000).contains(&self.ransac_iterations) {
+            return Err(format!(
+                "ransac_iterations: must be within 1..=100000, got {}",
+                self.ransac_iterations
+            ));
+        }
+        check_range("ransac_tolerance_m", self.ransac_tolerance_m, 0.001, 1.0)?;
+        check_range("buffer_below_m", self.buffer_below_m, 0.0, 10.0)?;
+        check_range("buffer_above_m", self.buffer_above_m, 0.0, 10.0)?;
+        check_range("window_m", self.window_m, 0.05, 5.0)?;
+        check_range("road_thickness_m", self.road_thickness_m, 0.001, 1.0)?;
+        check_range("max_cross_slope", self.max_cross_slope, 0.0, 1.0)?;
+        check_range("max_gap_m", self.max_gap_m, 0.0, 50.0)?;
+        check_range("max_offset_m", self.max_offset_m, 1.0, 500.0)?;
+        self.scan_lines.validate().map_err(|e| format!("scan_lines.{e}"))
+    }
+}
+
+/// Points of one chunk as the pavement stage sees them.
+pub struct Input<'a> {
+    pub x: &'a [f64],
+    pub y: &'a [f64],
+    pub z: &'a [f64],
+    /// Mileage along the trajectory (m), and signed lateral offset (m, left positive).
+    pub mileage: &'a [f64],
+    pub offset: &'a [f64],
+    /// GPS time, when known (the scan-line method orders by it).
+    pub gps_time: Option<&'a [f64]>,
+    pub scanner: &'a [u8],
+}
+
+/// Global slice index of a mileage.
+#[inline]
+pub fn slice_of(mileage: f64, slice_length_m: f64) -> i64 {
+    (mileage / slice_length_m).floor() as i64
+}
+
+/// Indices (ascending) of the pavement points.
+pub fn run(input: &Input<'_>, p: &Params) -> Vec<usize> {
+    match p.method {
+        Method::None => (0..input.z.len()).collect(),
+        Method::ScanLines => pavement_scanline::run(input, &p.scan_lines, p.max_offset_m),
+        Method::Slices => run_slices(input, p),
+    }
+}
+
+fn run_slices(input: &Input<'_>, p: &Params) -> Vec<usize> {
+    let n = input.z.len();
+    if n == 0 {
+        return Vec::new();
+    }
+    // Counting sort of the point indices by slice.
+    let slice: Vec<i64> = input
+        .mileage
+        .iter()
+        .map(|&m| slice_of(m, p.slice_length_m))
+        .collect();
+    let s0 = *slice.iter().min().expect("non-empty");
+    let s1 = *slice.iter().max().expect("non-empty");
+    let ns = (s1 - s0 + 1) as usize;
+    let mut start = vec![0usize; ns + 1];
+    for &s in &slice {
+        start[(s - s0) as usize + 1] += 1;
+    }
+    for k in 0..ns {
+        start[k + 1] += start[k];
+    }
+    let mut fill = start.clone();
+    let mut order = vec![0usize; n];
+    for (i, &s) in slice.iter().enumerate() {
+        let k = (s - s0) as usize;
+        order[fill[k]] = i;
+        fill[k] += 1;
+    }
+    let mut kept: Vec<usize> = (0..ns)
+        .into_par_iter()
+        .flat_map_iter(|k| {
+            let idx = &order[start[k]..start[k + 1]];
+            let gs = s0 + k as i64;
+            slice_pavement(idx, input, gs as f64 * p.slice_length_m, gs, p)
+        })
+        .collect();
+    kept.sort_unstable();
+    kept
+}
+
+/// Quantile of a scratch slice (reorders it).
+fn quantile(v: &mut [f64], q: f64) -> f64 {
+    let k = ((v.len() - 1) as f64 * q).round() as usize;
+    *v.select_nth_unstable_by(k, f64::total_cmp).1
+}
+
+/// A fitted road plane z = a + b·u + c·s.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Plane {
+    pub a: f64,
+    pub b: f64,
+    pub c: f64,
+}
+
+impl Plane {
+    #[inline]
+    pub fn at(&self, u: f64, s: f64) -> f64 {
+        self.a + self.b * u + self.c * s
+    }
+}
+
+/// Least-squares plane through points (u, s, z); `None` when degenerate. The grade term
+/// is dropped (c = 0) when the points do not spread along s.
+fn lsq_plane(pts: &[[f64; 3]]) -> Option<Plane> {
+    let n = pts.len() as f64;
+    if pts.len() < 2 {
+        return None;
+    }
+    let (mu, ms, mz) = pts
+        .iter()
+        .fold((0.0, 0.0, 0.0), |a, p| (a.0 + p[0], a.1 + p[1], a.2 + p[2]));
+    let (mu, ms, mz) = (mu / n, ms / n, mz / n);
+    let (mut suu, mut sss, mut sus, mut suz, mut ssz) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for p in pts {
+        let (du, ds, dz) = (p[0] - mu, p[1] - ms, p[2] - mz);
+        suu += du * du;
+        sss += ds * ds;
+        sus += du * ds;
+        suz += du * dz;
+        ssz += ds * dz;
+    }
+    let det = suu * sss - sus * sus;
+    let (b, c) = if sss > 1e-6 * n && det.abs() > 1e-9 * (suu * sss).max(1e-12) {
+        ((suz * sss - ssz * sus) / det, (ssz * suu - suz * sus) / det)
+    } else if suu > 1e-12 {
+        (suz / suu, 0.0)
+    } else {
+        return None;
+    };
+    Some(Plane {
+        a: mz - b * mu - c * ms,
+        b,
+        c,
+    })
+}
+
+/// Plane through three points; `None` when they are (nearly) collinear in (u, s).
+fn plane3(p: &[f64; 3], q: &[f64; 3], r: &[f64; 3]) -> Option<Plane> {
+    let (u1, s1, z1) = (q[0] - p[0], q[1] - p[1], q[2] - p[2]);
+    let (u2, s2, z2) = (r[0] - p[0], r[1] - p[1], r[2] - p[2]);
+    let det = u1 * s2 - u2 * s1;
+    if det.abs() < 1e-4 {
+        return None;
+    }
+    let b = (z1 * s2 - z2 * s1) / det;
+    let c = (u1 * z2 - u2 * z1) / det;
+    Some(Plane {
+        a: p[2] - b * p[0] - c * p[1],
+        b,
+        c,
+    })
+}
+
+/// RANSAC plane through pseudo scan points, refined on its inliers.
+pub fn ransac_plane(pts: &[[f64; 3]], iterations: u32, tol: f64, seed: u64) -> Option<Plane> {
+    if pts.len() < 3 {
+        return lsq_plane(pts);
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let count = |pl: &Plane| {
+        pts.iter()
+            .filter(|p| (p[2] - pl.at(p[0], p[1])).abs() <= tol)
+            .count()
+    };
+    let mut best: Option<(usize, Plane)> = None;
+    let mut needed = iterations as f64;
+    let mut it = 0u32;
+    while (it as f64) < needed && it < iterations {
+        it += 1;
+        let i = rng.random_range(0..pts.len());
+        let j = rng.random_range(0..pts.len());
+        let k = rng.random_range(0..pts.len());
+        // A line in u is a valid road model when the slice has no spread along s.
+        let cand = plane3(&pts[i], &pts[j], &pts[k]).or_else(|| {
+            let (p, q) = (&pts[i], &pts[j]);
+            let du = q[0] - p[0];
+            (du.abs() > 1e-3).then(|| {
+                let b = (q[2] - p[2]) / du;
+                Plane {
+                    a: p[2] - b * p[0],
+                    b,
+                    c: 0.0,
+                }
+            })
+        });
+        let Some(pl) = cand else { continue };
+        // A road plane is never steeper than 45°: skip walls and trees.
+        if pl.b.abs() > 1.0 || pl.c.abs() > 1.0 {
+            continue;
+        }
+        let c = count(&pl);
+        if best.as_ref().is_none_or(|(bc, _)| c > *bc) {
+            best = Some((c, pl));
+            // Adaptive termination: iterations for 99 % confidence at this inlier ratio.
+            let w = c as f64 / pts.len() as f64;
+            let miss = 1.0 - w * w * w;
+            if miss <= 1e-12 {
+                needed = 0.0;
+            } else {
+                needed = ((0.01f64).ln() / miss.ln()).ceil().max(10.0);
+            }
+        }
+    }
+    let (_, pl) = best?;
+    let inliers: Vec<[f64; 3]> = pts
+        .iter()
+        .filter(|p| (p[2] - pl.at(p[0], p[1])).abs() <= tol)
+        .copied()
+        .collect();
+    lsq_plane(&inliers).or(Some(pl))
+}
+
+/// Per-window summary of the buffered points.
+#[derive(Clone, Debug)]
+struct Window {
+    /// Indices (into the slice's buffered points) of the window's points.
+    members: Vec<usize>,
+    level: f64,
+    thick: f64,
+}
+
+fn slice_pavement(idx: &[usize], input: &Input<'_>, s_start: f64, slice_id: i64, p: &Params) -> Vec<usize> {
+    // Cross-section coordinates: u across, s along (from the slice start), z up.
+    let pts: Vec<(usize, f64, f64, f64)> = idx
+        .iter()
+        .filter(|&&i| input.offset[i].abs() <= p.max_offset_m)
+        .map(|&i| (i, input.offset[i], input.mileage[i] - s_start, input.z[i]))
+        .collect();
+    if pts.len() < 3 {
+        return Vec::new();
+    }
+    // 1. Pseudo scan points: lowest per (u interval, 0.5 m sub-slice).
+    let sub = (p.slice_length_m / 0.5).round().max(1.0);
+    let sub_len = p.slice_length_m / sub;
+    let ub = |u: f64| (u / p.pseudo_bin_m).floor() as i64;
+    let u_lo = pts.iter().map(|t| ub(t.1)).min().expect("non-empty");
+    let u_hi = pts.iter().map(|t| ub(t.1)).max().expect("non-empty");
+    let nu = (u_hi - u_lo + 1) as usize;
+    let nsub = sub as usize;
+    let mut lowest: Vec<Option<[f64; 3]>> = vec![None; nu * nsub];
+    for &(_, u, s, z) in &pts {
+        let k = ((s / sub_len).floor().clamp(0.0, sub - 1.0) as usize) * nu + (ub(u) - u_lo) as usize;
+        if lowest[k].is_none_or(|l| z < l[2]) {
+            lowest[k] = Some([u, s, z]);
+        }
+    }
+    let pseudo: Vec<[f64; 3]> = lowest.into_iter().flatten().collect();
+    // 2. RANSAC plane and buffer.
+    let seed = p.seed ^ (slice_id as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    let Some(plane) = ransac_plane(&pseudo, p.ransac_iterations, p.ransac_tolerance_m, seed) else {
+        return Vec::new();
+    };
+    let buffered: Vec<(usize, f64, f64)> = pts
+        .iter()
+        .map(|&(i, u, s, z)| (i, u, z - plane.at(u, s)))
+        .filter(|&(_, _, r)| r >= -p.buffer_below_m && r <= p.buffer_above_m)
+        .collect();
+    if buffered.is_empty() {
+        return Vec::new();
+    }
+    // 3. Moving windows, centred on the trajectory (window 0 holds u ∈ [-w/2, w/2)).
+    let wi = |u: f64| (u / p.window_m + 0.5).floor() as i64;
+    let w_lo = buffered.iter().map(|t| wi(t.1)).min().expect("non-empty");
+    let w_hi = buffered.iter().map(|t| wi(t.1)).max().expect("non-empty");
+    let mut windows: Vec<Window> = (w_lo..=w_hi)
+        .map(|_| Window {
+            members: Vec::new(),
+            level: 0.0,
+            thick: 0.0,
+        })
+        .collect();
+    for (k, t) in buffered.iter().enumerate() {
+        windows[(wi(t.1) - w_lo) as usize].members.push(k);
+    }
+    let mut scratch = Vec::new();
+    let mut thicknesses = Vec::new();
+    for w in &mut windows {
+        if w.members.is_empty() {
+            continue;
+        }
+        scratch.clear();
+        scratch.extend(w.members.iter().map(|&k| buffered[k].2));
+        let lo = quantile(&mut scratch, 0.1);
+        let hi = quantile(&mut scratch, 0.9);
+        w.level = lo;
+        w.thick = hi - lo;
+        thicknesses.push(w.thick);
+    }
+    let thickness = if thicknesses.is_empty() {
+        p.road_thickness_m
+    } else {
+        p.road_thickness_m.max(1.5 * quantile(&mut thicknesses, 0.5))
+    };
+
+    let mut keep: Vec<usize> = Vec::new();
+    let get = |w: i64| -> Option<&Window> {
+        (w >= w_lo && w <= w_hi)
+            .then(|| &windows[(w - w_lo) as usize])
+            .filter(|x| !x.members.is_empty())
+    };
+    let max_w = (p.max_offset_m / p.window_m).ceil() as i64 + 1;
+    // Reference level: the window under the vehicle when it is flat, else the plane.
+    let base = get(0)
+        .filter(|w| w.thick <= thickness)
+        .map(|w| w.level)
+        .unwrap_or(0.0);
+    for dir in [1i64, -1] {
+        let mut prev = base;
+        let mut gap = 0.0;
+        let mut k: i64 = if dir == 1 { 0 } else { -1 };
+        while k.abs() <= max_w && k >= w_lo - 1 && k <= w_hi + 1 {
+            let Some(w) = get(k) else {
+                gap += p.window_m;
+                if gap > p.max_gap_m {
+                    break;
+                }
+                k += dir;
+                continue;
+            };
+            let allowance = thickness + p.max_cross_slope * (gap + p.window_m);
+            let near = |r: f64, lvl: f64| (r - lvl).abs() <= thickness;
+            if (w.level - prev).abs() > allowance {
+                break; // the surface steps up (sidewalk) or down (ditch): end of road
+            }
+            if w.thick <= thickness {
+                keep.extend(
+                    w.members
+                        .iter()
+                        .filter(|&&m| near(buffered[m].2, w.level))
+                        .map(|&m| buffered[m].0),
+                );
+                prev = w.level;
+                gap = 0.0;
+                k += dir;
+                continue;
+            }
+            // Key window: interior obstacle or road edge? Look for the next flat window.
+            let mut j = k + dir;
+            let mut look_gap = 0.0;
+            let mut returns = false;
+            while look_gap <= p.max_gap_m && j.abs() <= max_w && j >= w_lo && j <= w_hi {
+                match get(j) {
+                    Some(x) if x.thick <= thickness => {
+                        let allow =
+                            thickness + p.max_cross_slope * (look_gap + p.window_m * (j - k).abs() as f64);
+                        returns = (x.level - prev).abs() <= allow;
+                        break;
+                    }
+                    _ => look_gap += p.window_m,
+                }
+                j += dir;
+            }
+            if returns {
+                keep.extend(
+                    w.members
+                        .iter()
+                        .filter(|&&m| near(buffered[m].2, prev))
+                        .map(|&m| buffered[m].0),
+                );
+                gap = 0.0;
+                k += dir;
+                continue;
+            }
+            // Edge: cut at the innermost point clearly above the road (eq. 8).
+            let high = w
+                .members
+                .iter()
+                .filter(|&&m| buffered[m].2 > prev + thickness)
+                .map(|&m| buffered[m].1);
+            let cut = if dir == 1 {
+                high.fold(f64::INFINITY, f64::min)
+            } else {
+                high.fold(f64::NEG_INFINITY, f64::max)
+            };
+            keep.extend(
+                w.members
+                    .iter()
+                    .filter(|&&m| {
+                        let (_, u, r) = buffered[m];
+                        near(r, prev) && if dir == 1 { u < cut } else { u > cut }
+                    })
+                    .map(|&m| buffered[m].0),
+            );
+            break;
+        }
+    }
+    keep
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 10 m stretch of road (u ∈ [-3, 4)) with a 2 % cross slope and a 3 % grade; a
+    /// 0.15 m curb at u = 4 with sidewalk beyond; a 0.2 m high box on the road; a 0.2 m
+    /// barrier at u ∈ [-3.2, -3.0] with an embankment 0.25 m lower behind it and a wall at
+    /// u < -5. Points on a jittered 2.5 cm grid, deterministic.
+    fn scene() -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<bool>) {
+        let (mut m, mut u, mut z, mut road) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let mut k = 0u64;
+        let mut jit = || {
+            k = k
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((k >> 33) as f64 / (1u64 << 31) as f64) - 0.5
+        };
+        for i in 0..400 {
+            for j in 0..500 {
+                let mm = i as f64 * 0.025 + 0.01 * jit();
+                let uu = -5.5 + j as f64 * 0.025 + 0.01 * jit();
+                let ground = 0.02 * uu + 0.03 * mm + 0.005 * jit();
+                let (zz, is_road) = if uu < -5.0 {
+                    (ground + 1.0 + 2.0 * jit().abs(), false)
+                } else if uu < -3.2 {
+                    (ground - 0.25, false)
+                } else if uu < -3.0 {
+                    (ground + 0.2, false)
+                } else if (-2.2..-1.8).contains(&uu) && (4.0..5.0).contains(&mm) {
+                    (ground + 0.2, false)
+                } else if uu < 4.0 {
+                    (ground, true)
+                } else {
+                    (ground + 0.15, false)
+                };
+                m.push(mm);
+                u.push(uu);
+                z.push(zz);
+                road.push(is_road);
+            }
+        }
+        (m, u, z, road)
+    }
+
+    fn run_on(m: &[f64], u: &[f64], z: &[f64], p: &Params) -> Vec<usize> {
+        let zeros = vec![0.0; m.len()];
+        let heads = vec![0u8; m.len()];
+        run(
+            &Input {
+                x: &zeros,
+                y: &zeros,
+                z,
+                mileage: m,
+                offset: u,
+                gps_time: None,
+                scanner: &heads,
+            },
+            p,
+        )
+    }
+
+    #[test]
+    fn defaults_validate_and_absurd_values_are_named() {
+        Params::default().validate().unwrap();
+        let p = Params {
+            slice_length_m: 0.0,
+            ..Params::default()
+        };
+        assert!(p.validate().unwrap_err().starts_with("slice_length_m"));
+        let p = Params {
+            window_m: f64::NAN,
+            ..Params::default()
+        };
+        assert!(p.validate().unwrap_err().starts_with("window_m"));
+    }
+
+    #[test]
+    fn ransac_finds_the_road_plane_among_outliers() {
+        let mut pts = Vec::new();
+        for i in 0..200 {
+            let u = -5.0 + i as f64 * 0.05;
+            let s = (i % 4) as f64 * 0.5;
+            pts.push([u, s, 0.5 + 0.02 * u - 0.04 * s]);
+        }
+        for i in 0..60 {
+            pts.push([i as f64 * 0.05, 0.3, 3.0 + i as f64 * 0.1]);
+        }
+        let pl = ransac_plane(&pts, 200, 0.01, 7).unwrap();
+        assert!(
+            (pl.a - 0.5).abs() < 1e-6 && (pl.b - 0.02).abs() < 1e-6 && (pl.c + 0.04).abs() < 1e-6,
+            "{pl:?}"
+        );
+    }
+
+    #[test]
+    fn flat_road_with_curb_box_and_barrier() {
+        let (m, u, z, road) = scene();
+        let kept = run_on(&m, &u, &z, &Params::default());
+        let mut is_kept = vec![false; m.len()];
+        for &i in &kept {
+            is_kept[i] = true;
+        }
+        let (mut tp, mut fp, mut fneg) = (0, 0, 0);
+        for i in 0..m.len() {
+            match (is_kept[i], road[i]) {
+                (true, true) => tp += 1,
+                (true, false) => fp += 1,
+                (false, true) => fneg += 1,
+                _ => {}
+            }
+        }
+        let fp_rate = fp as f64 / (tp + fp) as f64;
+        let miss = fneg as f64 / (tp + fneg) as f64;
+        assert!(fp_rate < 0.005, "false pavement {fp} of {}", tp + fp);
+        assert!(miss < 0.03, "missed pavement {fneg} of {}", tp + fneg);
+        // Nothing on the sidewalk (u > 4.05) and nothing of the box.
+        for &i in &kept {
+            assert!(u[i] < 4.05, "sidewalk point kept at u = {}", u[i]);
+            assert!(z[i] < 0.02 * u[i] + 0.03 * m[i] + 0.1, "raised point kept");
+        }
+    }
+
+    #[test]
+    fn result_does_not_depend_on_point_order() {
+        let (m, u, z, _) = scene();
+        let a = run_on(&m, &u, &z, &Params::default());
+        // Reverse the order (as a second scanner head interleaving would permute it).
+        let rev = |v: &[f64]| v.iter().rev().copied().collect::<Vec<_>>();
+        let b = run_on(&rev(&m), &rev(&u), &rev(&z), &Params::default());
+        let n = m.len();
+        let mut b: Vec<usize> = b.into_iter().map(|i| n - 1 - i).collect();
+        b.sort_unstable();
+        assert_eq!(a, b);
+    }
+
+    #[test]
+    fn method_none_keeps_everything_and_empty_input_is_empty() {
+        let p = Params {
+            method: Method::None,
+            ..Params::default()
+        };
+        assert_eq!(run_on(&[0.0, 1.0], &[0.0, 0.0], &[0.0, 5.0], &p), vec![0, 1]);
+        assert!(run_on(&[], &[], &[], &Params::default()).is_empty());
     }
 }

@@ -122,6 +122,10 @@ pub struct Reflectance {
     /// Scene-wide paint wear 0..1.
     pub wear: f64,
     pub features: Vec<SurfaceFeature>,
+    /// Offsets d of the wheel tracks (road frame) and the extra wear at their centre: tyres
+    /// abrade transverse markings (crosswalks, stop lines, arrows) where vehicles run.
+    pub tracks: Vec<f64>,
+    pub track_wear: f64,
     s_min: f64,
     buckets: Vec<Vec<u32>>,
 }
@@ -140,6 +144,8 @@ impl Reflectance {
             texture,
             wear,
             features,
+            tracks: Vec::new(),
+            track_wear: 0.0,
             s_min: 0.0,
             buckets: Vec::new(),
         }
@@ -199,14 +205,20 @@ impl Reflectance {
         }
     }
 
-    /// Paint reflectance at a point of a marking with extra wear `extra`; `None` where the
-    /// paint has worn away completely.
-    pub fn paint(&self, colour: Colour, extra: f64, x: f64, y: f64) -> Option<f64> {
+    /// Paint reflectance at a point (road offset `d`, local x, y) of a marking with extra
+    /// wear `extra`; `None` where the paint has worn away completely.
+    pub fn paint(&self, colour: Colour, extra: f64, d: f64, x: f64, y: f64) -> Option<f64> {
         let fresh = match colour {
             Colour::White => 0.55,
             Colour::Yellow => 0.45,
         };
-        let wear = (self.wear + extra).clamp(0.0, 1.0);
+        let near = self
+            .tracks
+            .iter()
+            .map(|t| (d - t).abs())
+            .fold(f64::INFINITY, f64::min);
+        let track = self.track_wear * (-near * near / (2.0 * 0.3 * 0.3)).exp();
+        let wear = (self.wear + extra + track).clamp(0.0, 1.0);
         if wear <= 0.0 {
             return Some(fresh * (1.0 + 0.05 * value_noise(self.seed ^ 23, x, y, 0.3)));
         }

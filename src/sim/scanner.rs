@@ -248,7 +248,7 @@ impl World<'_> {
                 let mut rho = None;
                 if let Some(k) = self.mindex.lookup(self.markings, s, d, p[0], p[1]) {
                     let m = &self.markings[k];
-                    if let Some(r) = self.refl.paint(m.colour, m.wear, p[0], p[1]) {
+                    if let Some(r) = self.refl.paint(m.colour, m.wear, d, p[0], p[1]) {
                         label = k as u32 + 1;
                         rho = Some(r);
                     }

@@ -275,6 +275,9 @@ fn highway(opt: &SceneOptions, rng: &mut ChaCha8Rng) -> Scene {
         }
     };
     let pave_l = opp_right + 3.0;
+    // Beyond the painted gore (wider than 4.5 m) the ramp and the main road are separated
+    // by a grass island.
+    let s_island = s_t + (80.0f64 * 80.0 + 4.5 / c1).sqrt();
     let profile = move |s: f64| {
         let pr = pave_r(s);
         let zr = 0.02 * (pr - 0.75);
@@ -285,8 +288,13 @@ fn highway(opt: &SceneOptions, rng: &mut ChaCha8Rng) -> Scene {
             .push(pr - 5.0, zr - 1.0, Material::Grass)
             .push(pr - 2.0, zr - 0.2, Material::Grass)
             .push(pr - 0.6, zr - 0.04, Material::Grass)
-            .push(pr, zr, Material::Asphalt)
-            .push(0.75, 0.0, Material::Concrete)
+            .push(pr, zr, Material::Asphalt);
+        if s > s_island && s < s_re {
+            let (a, b) = (ramp_left.at(s) + 0.6, right - 0.6);
+            p.push(a, 0.02 * (a - 0.75), Material::Grass)
+                .push(b, 0.02 * (b - 0.75), Material::Asphalt);
+        }
+        p.push(0.75, 0.0, Material::Concrete)
             .push(1.35, 0.0, Material::Asphalt)
             .push(pave_l, zl, Material::Grass)
             .push(pave_l + 0.6, zl - 0.04, Material::Grass)
@@ -513,7 +521,9 @@ fn highway(opt: &SceneOptions, rng: &mut ChaCha8Rng) -> Scene {
         let l = uniform(rng, 2.0, 9.0);
         feats.push(sealant(&road, rng, s, d, a, l));
     }
-    let refl = Reflectance::new(opt.seed, 0.11, 0.22, 0.08, feats);
+    let mut refl = Reflectance::new(opt.seed, 0.11, 0.22, 0.08, feats);
+    refl.tracks = wheel_tracks(&[lane_c(1), lane_c(2), lane_c(3), lane_c(4)]);
+    refl.track_wear = 0.25;
     Scene {
         name: "highway".into(),
         road,
@@ -530,6 +540,11 @@ fn highway(opt: &SceneOptions, rng: &mut ChaCha8Rng) -> Scene {
 }
 
 /// A moving car starting somewhere in stations [lo, hi).
+/// Wheel tracks 0.85 m either side of each lane centre.
+fn wheel_tracks(lane_centres: &[f64]) -> Vec<f64> {
+    lane_centres.iter().flat_map(|&c| [c - 0.85, c + 0.85]).collect()
+}
+
 fn moving_car(rng: &mut ChaCha8Rng, lo: f64, hi: f64, d: f64, v: f64) -> MovingCar {
     MovingCar {
         s0: uniform(rng, lo, hi),
@@ -992,17 +1007,26 @@ fn urban(name: &str, opt: &SceneOptions, rng: &mut ChaCha8Rng, style: UrbanStyle
         rho: if worn { 0.1 } else { 0.075 },
     });
     let (asphalt, texture, wear) = match style {
-        UrbanStyle::Worn => (0.16, 0.35, 0.55),
+        UrbanStyle::Worn => (0.16, 0.35, 0.4),
         _ => (0.12, 0.25, 0.12),
     };
     for mk in &mut m.markings {
         mk.wear = if worn {
-            uniform(rng, 0.0, 0.3)
+            uniform(rng, 0.0, 0.25)
         } else {
             uniform(rng, 0.0, 0.15)
         };
     }
-    let refl = Reflectance::new(opt.seed, asphalt, texture, wear, feats);
+    let mut refl = Reflectance::new(opt.seed, asphalt, texture, wear, feats);
+    refl.tracks = wheel_tracks(&[
+        -lane_c(1),
+        -lane_c(2),
+        -lane_c(3),
+        lane_c(1),
+        lane_c(2),
+        lane_c(3),
+    ]);
+    refl.track_wear = if worn { 0.35 } else { 0.25 };
     let heads = if style == UrbanStyle::DualHead {
         Head::butterfly()
     } else {
@@ -1238,7 +1262,9 @@ fn ramp(opt: &SceneOptions, rng: &mut ChaCha8Rng) -> Scene {
             rho: 0.5,
         });
     }
-    let refl = Reflectance::new(opt.seed, 0.1, 0.2, 0.1, feats);
+    let mut refl = Reflectance::new(opt.seed, 0.1, 0.2, 0.1, feats);
+    refl.tracks = wheel_tracks(&[-0.5 * lw, -1.5 * lw]);
+    refl.track_wear = 0.2;
     Scene {
         name: "curved_ramp".into(),
         road,

@@ -241,27 +241,24 @@ fn is_crs(node: &Node) -> bool {
 }
 
 fn own_epsg(node: &Node) -> Option<u32> {
-    node.items
-        .iter()
-        .filter_map(|item| match item {
-            Item::Node(n)
-                if n.keyword.eq_ignore_ascii_case("AUTHORITY") || n.keyword.eq_ignore_ascii_case("ID") =>
-            {
-                let authority = match n.items.first()? {
-                    Item::Text(s) | Item::Word(s) => s,
-                    Item::Node(_) => return None,
-                };
-                if !authority.eq_ignore_ascii_case("EPSG") {
-                    return None;
-                }
-                match n.items.get(1)? {
-                    Item::Text(s) | Item::Word(s) => s.trim().parse::<u32>().ok(),
-                    Item::Node(_) => None,
-                }
+    node.items.iter().rev().find_map(|item| match item {
+        Item::Node(n)
+            if n.keyword.eq_ignore_ascii_case("AUTHORITY") || n.keyword.eq_ignore_ascii_case("ID") =>
+        {
+            let authority = match n.items.first()? {
+                Item::Text(s) | Item::Word(s) => s,
+                Item::Node(_) => return None,
+            };
+            if !authority.eq_ignore_ascii_case("EPSG") {
+                return None;
             }
-            _ => None,
-        })
-        .last()
+            match n.items.get(1)? {
+                Item::Text(s) | Item::Word(s) => s.trim().parse::<u32>().ok(),
+                Item::Node(_) => None,
+            }
+        }
+        _ => None,
+    })
 }
 
 fn node_name(node: &Node) -> Option<&str> {

@@ -133,18 +133,6 @@ pub(crate) fn open_file(path: &Path) -> Result<File, PipelineError> {
     }
 }
 
-/// Read a whole (small) file.
-pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>, PipelineError> {
-    let mut bytes = Vec::new();
-    open_file(path)?
-        .read_to_end(&mut bytes)
-        .map_err(|e| PipelineError::Io {
-            path: path.to_path_buf(),
-            source: e,
-        })?;
-    Ok(bytes)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -416,9 +416,34 @@ pub fn parse_with_summary(text: &str, path: &Path) -> Result<(Trajectory, Trajec
     Ok((traj, summary))
 }
 
-/// Read a file's text: errors for missing, empty and binary files.
+/// Read a file's text: errors for missing, empty and binary files. The first bytes are
+/// checked before the rest is read, so a multi-gigabyte point file given by mistake is
+/// refused at once.
 fn read_text(path: &Path) -> Result<String, PipelineError> {
-    let bytes = super::read_file(path)?;
+    use std::io::Read;
+    let io_err = |e| PipelineError::Io {
+        path: path.to_path_buf(),
+        source: e,
+    };
+    let mut file = super::open_file(path)?;
+    let mut bytes = Vec::new();
+    (&mut file)
+        .take(super::SNIFF_BYTES as u64)
+        .read_to_end(&mut bytes)
+        .map_err(io_err)?;
+    if bytes.starts_with(b"LASF") {
+        return Err(PipelineError::input(
+            path,
+            "this is a LAS/LAZ point file, not a trajectory table",
+        ));
+    }
+    if bytes.contains(&0) {
+        return Err(PipelineError::input(
+            path,
+            "not a text file (it contains NUL bytes); a trajectory is a text table",
+        ));
+    }
+    file.read_to_end(&mut bytes).map_err(io_err)?;
     if bytes.iter().all(|b| b.is_ascii_whitespace()) {
         return Err(PipelineError::input(
             path,
@@ -427,12 +452,6 @@ fn read_text(path: &Path) -> Result<String, PipelineError> {
             } else {
                 "empty trajectory: the file holds only blank lines"
             },
-        ));
-    }
-    if bytes.starts_with(b"LASF") {
-        return Err(PipelineError::input(
-            path,
-            "this is a LAS/LAZ point file, not a trajectory table",
         ));
     }
     if bytes.contains(&0) {
@@ -579,5 +598,50 @@ mod tests {
         assert!(looks_like_trajectory(
             "time,x,y,\"é".as_bytes().split_last().unwrap().1
         ));
+    }
+
+    mod properties {
+        use super::*;
+        use proptest::prelude::*;
+
+        proptest! {
+            /// Any text: a trajectory or an input error, never a panic.
+            #[test]
+            fn arbitrary_text_never_panics(text in "\\PC{0,200}") {
+                let _ = parse_trajectory(&text, Path::new("p.csv"));
+                let _ = looks_like_trajectory(text.as_bytes());
+            }
+
+            /// Column order, extra columns, delimiter and name case do not change the poses.
+            #[test]
+            fn layout_does_not_change_the_poses(
+                order in Just(vec![0usize, 1, 2, 3, 4]).prop_shuffle(),
+                delimiter in 0usize..4,
+                upper in any::<bool>(),
+                rows in proptest::collection::vec((-1e6f64..1e6, -1e6f64..1e6, -100f64..100.0), 2..20),
+            ) {
+                let names = ["time", "x", "y", "z", "quality"];
+                let sep = [",", ";", "\t", "   "][delimiter];
+                let cell = |name: &str| if upper { name.to_uppercase() } else { name.to_string() };
+                let mut text = order.iter().map(|&c| cell(names[c])).collect::<Vec<_>>().join(sep);
+                text.push('\n');
+                for (i, (x, y, z)) in rows.iter().enumerate() {
+                    let values = [i as f64, *x, *y, *z, 7.0];
+                    let line: Vec<String> = order.iter().map(|&c| format!("{}", values[c])).collect();
+                    text.push_str(&line.join(sep));
+                    text.push('\n');
+                }
+                match parse_trajectory(&text, Path::new("p.csv")) {
+                    Ok(t) => {
+                        for p in t.poses() {
+                            let (x, y, z) = rows[p.time as usize];
+                            prop_assert_eq!((p.x, p.y, p.z), (x, y, z));
+                        }
+                    }
+                    // Rows can coincide (merged); fewer than 2 distinct positions is an error.
+                    Err(e) => prop_assert!(e.to_string().contains("distinct positions"), "{}", e),
+                }
+            }
+        }
     }
 }

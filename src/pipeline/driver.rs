@@ -1,0 +1,716 @@
+//! The pipeline driver: read → (per chunk) pavement → rasterize → threshold → cluster →
+//! classify → vectorize, then lane lines over the whole drive.
+//!
+//! **Algorithm.**
+//! 1. *read*: the trajectory is read and made local to the job origin (its first pose,
+//!    floored to whole metres). Tiles are streamed; every point is located on the
+//!    trajectory (kd-tree [`StationIndex`], in parallel) and kept when it lies within
+//!    `pavement.max_offset_m` of it, then appended to the chunks that see its mileage
+//!    ([`chunk::Store`], spilling to disk beyond `chunk.memory_budget_mb`).
+//! 2. Per chunk, in mileage order: pavement, background normalisation + IDW, adaptive
+//!    threshold, and the marking points of the chunk's *core* (each point belongs to exactly
+//!    one core, so no point is counted twice).
+//! 3. *cluster*: marking points are clustered across chunk joins by a streaming scheme:
+//!    clusters that come within `JOIN_MARGIN_M` of the next core stay open and are
+//!    re-clustered with the next chunk's points; the others are complete. Points are put in
+//!    a canonical order (by coordinates) first, so the clusters do not depend on where the
+//!    chunk edges fell. Clusters longer than `PIECE_M` along the trajectory are cut at
+//!    global multiples of it (solid-line pieces; the lane-line stage joins them), which
+//!    bounds the memory of open clusters on endless solid lines.
+//! 4. *classify* + *vectorize* complete clusters into markings (absolute coordinates),
+//!    then lane lines are linked once over all markings.
+//!
+//! Everything is deterministic: parallel stages reduce in a fixed order and RANSAC is
+//! seeded per slice.
+
+use super::chunk::{ChunkPoints, Plan, Store};
+use super::error::PipelineError;
+use super::params::ValidParams;
+use super::types::{Crs, Extraction, LaneLine, Marking, PointCloud, StationIndex, Trajectory};
+use super::{Inputs, Progress, io, pavement, rasterize, threshold};
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// Clusters reaching this close (mileage) to the next core stay open (m).
+pub const JOIN_MARGIN_M: f64 = 2.5;
+/// Clusters longer than this along the trajectory are cut at its global multiples (m).
+pub const PIECE_M: f64 = 250.0;
+
+/// Stable stage names, in pipeline order.
+pub const STAGES: [&str; 7] = [
+    "read",
+    "pavement",
+    "rasterize",
+    "threshold",
+    "cluster",
+    "classify",
+    "vectorize",
+];
+
+/// Counters and timings of one run (for the summary line and `roadmark bench`).
+#[derive(Clone, Debug, Default)]
+pub struct RunStats {
+    /// Points read from the tiles.
+    pub points_read: u64,
+    /// Points within `max_offset_m` of the trajectory (what the chunks hold, without
+    /// overlap duplicates).
+    pub points_near_track: u64,
+    /// Points processed by the chunk stages (overlaps counted in every chunk).
+    pub points_processed: u64,
+    pub pavement_points: u64,
+    pub marking_points: u64,
+    pub clusters: u64,
+    pub chunks: usize,
+    pub spilled_points: u64,
+    /// Wall-clock seconds per stage, in [`STAGES`] order.
+    pub stage_seconds: [f64; 7],
+    pub total_seconds: f64,
+}
+
+impl RunStats {
+    fn add(&mut self, stage: usize, t0: Instant) {
+        self.stage_seconds[stage] += t0.elapsed().as_secs_f64();
+    }
+}
+
+struct Ctx<'a> {
+    params: &'a ValidParams,
+    progress: &'a dyn Progress,
+    stats: RunStats,
+    /// When set, every marking point is also appended here (job-local coordinates).
+    collect: Option<PointCloud>,
+}
+
+impl Ctx<'_> {
+    fn check(&self) -> Result<(), PipelineError> {
+        if self.progress.is_cancelled() {
+            Err(PipelineError::Cancelled)
+        } else {
+            Ok(())
+        }
+    }
+}
+
+/// Fractions of the whole job: reading, chunk processing, final linking.
+const READ_SHARE: f64 = 0.3;
+const CHUNK_SHARE: f64 = 0.65;
+
+/// Run the whole pipeline and return the extraction with its statistics.
+pub fn run_with_stats(
+    inputs: &Inputs,
+    params: &ValidParams,
+    progress: &dyn Progress,
+) -> Result<(Extraction, RunStats), PipelineError> {
+    let mut ctx = Ctx {
+        params,
+        progress,
+        stats: RunStats::default(),
+        collect: None,
+    };
+    let ex = run_ctx(&mut ctx, inputs)?;
+    Ok((ex, ctx.stats))
+}
+
+/// Run the pipeline and also return every marking point (absolute coordinates in the
+/// returned cloud's `origin` + local), for per-point evaluation against labelled data.
+pub fn run_collecting_marking_points(
+    inputs: &Inputs,
+    params: &ValidParams,
+    progress: &dyn Progress,
+) -> Result<(Extraction, PointCloud), PipelineError> {
+    let mut ctx = Ctx {
+        params,
+        progress,
+        stats: RunStats::default(),
+        collect: Some(PointCloud::default()),
+    };
+    let ex = run_ctx(&mut ctx, inputs)?;
+    Ok((ex, ctx.collect.take().unwrap_or_default()))
+}
+
+fn run_ctx(ctx: &mut Ctx<'_>, inputs: &Inputs) -> Result<Extraction, PipelineError> {
+    let t_start = Instant::now();
+    let params = ctx.params;
+    if inputs.points.is_empty() {
+        return Err(PipelineError::Params("no point files given".into()));
+    }
+    ctx.progress.report("read", 0.0);
+    let t0 = Instant::now();
+    let traj_abs = io::read_trajectory(&inputs.trajectory)?;
+    let first = traj_abs.poses()[0];
+    let origin = [
+        first.x.floor(),
+        first.y.floor(),
+        if first.z.is_finite() { first.z.floor() } else { 0.0 },
+    ];
+    let traj = traj_abs.to_local(origin);
+    let max_off = params.pavement.max_offset_m;
+    let plan = Plan::new(params, -max_off, traj.length_m() + max_off);
+    let mut store = Store::new(plan, params.chunk.memory_budget_mb);
+    let crs = read_into(ctx, inputs, origin, &traj, &mut store)?;
+    ctx.stats.add(0, t0);
+    ctx.stats.spilled_points = store.spilled_points;
+    ctx.check()?;
+
+    // Per chunk: points → marking points of the core → complete clusters → markings.
+    let mut streaming = Streaming::default();
+    let mut markings: Vec<(f64, Marking)> = Vec::new();
+    let n_chunks = plan.count();
+    ctx.stats.chunks = n_chunks;
+    for (ci, k) in (plan.first..=plan.last).enumerate() {
+        let base = READ_SHARE + CHUNK_SHARE * ci as f64 / n_chunks as f64;
+        let step = CHUNK_SHARE / n_chunks as f64;
+        let t0 = Instant::now();
+        let pts = store.take(k)?;
+        ctx.stats.add(0, t0);
+        let (core_lo, core_hi) = plan.core(k);
+        let (marks, marks_m) = if pts.is_empty() {
+            (PointCloud::with_origin(origin), Vec::new())
+        } else {
+            marking_points(ctx, &pts, origin, (core_lo, core_hi), base, step)?
+        };
+        drop(pts);
+        ctx.progress.report("cluster", base + 0.8 * step);
+        let t0 = Instant::now();
+        let last = ci + 1 == n_chunks;
+        if let Some(all) = ctx.collect.as_mut() {
+            if all.is_empty() {
+                *all = PointCloud::with_origin(origin);
+                all.gps_time = marks.gps_time.as_ref().map(|_| Vec::new());
+            }
+            all.extend_from(&marks);
+        }
+        let complete = streaming.feed(marks, marks_m, (!last).then_some(core_hi), cluster_groups, params);
+        ctx.stats.clusters += complete.len() as u64;
+        ctx.stats.add(4, t0);
+        ctx.check()?;
+        ctx.progress.report("classify", base + 0.9 * step);
+        markings.extend(finish_clusters(ctx, complete, &traj, origin)?);
+        ctx.check()?;
+    }
+
+    // Stable ids in mileage order, then lane lines over the whole drive.
+    ctx.progress.report("vectorize", READ_SHARE + CHUNK_SHARE);
+    let t0 = Instant::now();
+    markings.sort_by(|a, b| {
+        a.0.total_cmp(&b.0)
+            .then_with(|| a.1.outline[0][0].total_cmp(&b.1.outline[0][0]))
+            .then_with(|| a.1.outline[0][1].total_cmp(&b.1.outline[0][1]))
+    });
+    let mut markings: Vec<Marking> = markings.into_iter().map(|(_, m)| m).collect();
+    for (i, m) in markings.iter_mut().enumerate() {
+        m.id = format!("m{}", i + 1);
+    }
+    let lane_lines = link_lane_lines(&markings, &traj_abs, params);
+    ctx.stats.add(6, t0);
+    ctx.progress.report("vectorize", 1.0);
+    ctx.stats.total_seconds = t_start.elapsed().as_secs_f64();
+    Ok(Extraction {
+        markings,
+        lane_lines,
+        crs,
+    })
+}
+
+/// Stream every tile into the chunk store; returns the CRS of the first tile that has one.
+fn read_into(
+    ctx: &mut Ctx<'_>,
+    inputs: &Inputs,
+    origin: [f64; 3],
+    traj: &Trajectory,
+    store: &mut Store,
+) -> Result<Option<Crs>, PipelineError> {
+    let index = StationIndex::new(traj, 1.0);
+    let max_off = ctx.params.pavement.max_offset_m;
+    let (m_lo, m_hi) = (-max_off, traj.length_m() + max_off);
+    let need_intensity = ctx.params.threshold.method != threshold::Method::None;
+    let mut crs: Option<Crs> = None;
+    let total: u64 = inputs
+        .points
+        .iter()
+        .map(|p| io::inspect_points(p).map(|s| s.point_count))
+        .sum::<Result<u64, _>>()?
+        .max(1);
+    let mut batch = PointCloud::default();
+    for path in &inputs.points {
+        ctx.check()?;
+        let mut reader = io::PointReader::open(path)?;
+        reader.set_origin(origin);
+        if crs.is_none() {
+            crs = reader.crs().cloned();
+        }
+        let chunk = reader.preferred_chunk().max(1 << 18);
+        let mut n_tile = 0u64;
+        while reader.next_chunk(&mut batch, chunk)? > 0 {
+            n_tile += batch.len() as u64;
+            ctx.stats.points_read += batch.len() as u64;
+            push_batch(
+                &batch,
+                [0.0; 3],
+                &index,
+                (m_lo, m_hi),
+                max_off,
+                store,
+                &mut ctx.stats,
+            );
+            store.maybe_spill()?;
+            ctx.progress
+                .report("read", READ_SHARE * ctx.stats.points_read as f64 / total as f64);
+            ctx.check()?;
+        }
+        if need_intensity && n_tile > 0 && reader.nonzero_intensity_count() == 0 {
+            return Err(PipelineError::input(
+                path,
+                "has no intensity values (all zero); marking extraction needs intensity",
+            ));
+        }
+    }
+    if ctx.stats.points_near_track == 0 && ctx.stats.points_read > 0 {
+        return Err(PipelineError::input(
+            &inputs.trajectory,
+            format!(
+                "no point lies within {max_off} m of this trajectory (another drive, or a different CRS?)"
+            ),
+        ));
+    }
+    Ok(crs)
+}
+
+/// Locate a batch on the trajectory (in parallel) and append the points near it.
+fn push_batch(
+    cloud: &PointCloud,
+    shift: [f64; 3],
+    index: &StationIndex<'_>,
+    (m_lo, m_hi): (f64, f64),
+    max_off: f64,
+    store: &mut Store,
+    stats: &mut RunStats,
+) {
+    let stations: Vec<(f64, f64)> = (0..cloud.len())
+        .into_par_iter()
+        .with_min_len(4096)
+        .map(|i| {
+            let s = index.locate(cloud.x[i] + shift[0], cloud.y[i] + shift[1]);
+            (s.mileage_m, s.offset_m)
+        })
+        .collect();
+    let times = cloud.gps_time.as_deref();
+    for (i, &(m, o)) in stations.iter().enumerate() {
+        if o.abs() > max_off || m < m_lo || m > m_hi {
+            continue;
+        }
+        stats.points_near_track += 1;
+        store.push(
+            cloud.x[i] + shift[0],
+            cloud.y[i] + shift[1],
+            cloud.z[i] + shift[2],
+            cloud.intensity[i],
+            times.map_or(f64::NAN, |t| t[i]),
+            cloud.scanner[i],
+            m,
+            o,
+        );
+    }
+}
+
+/// Pavement → rasterize → threshold for one chunk; returns the marking points of its core
+/// (job-local coordinates) and their mileages.
+fn marking_points(
+    ctx: &mut Ctx<'_>,
+    c: &ChunkPoints,
+    origin: [f64; 3],
+    (core_lo, core_hi): (f64, f64),
+    base: f64,
+    step: f64,
+) -> Result<(PointCloud, Vec<f64>), PipelineError> {
+    let p = ctx.params;
+    ctx.stats.points_processed += c.len() as u64;
+    ctx.progress.report("pavement", base);
+    let t0 = Instant::now();
+    let has_time = c.gps_time.iter().all(|t| t.is_finite());
+    let pav = pavement::run(
+        &pavement::Input {
+            x: &c.x,
+            y: &c.y,
+            z: &c.z,
+            mileage: &c.mileage,
+            offset: &c.offset,
+            gps_time: has_time.then_some(c.gps_time.as_slice()),
+            scanner: &c.scanner,
+        },
+        &p.pavement,
+    );
+    // Pavement points of the core count once (overlaps are seen by two chunks).
+    ctx.stats.pavement_points += pav
+        .iter()
+        .filter(|&&i| c.mileage[i] >= core_lo && c.mileage[i] < core_hi)
+        .count() as u64;
+    ctx.stats.add(1, t0);
+    ctx.check()?;
+
+    let is_mark: Vec<bool> = match p.threshold.method {
+        threshold::Method::None => vec![true; pav.len()],
+        threshold::Method::Adaptive => {
+            ctx.progress.report("rasterize", base + 0.25 * step);
+            let t0 = Instant::now();
+            let gather_f64 = |v: &[f64]| pav.iter().map(|&i| v[i]).collect::<Vec<f64>>();
+            let (px, py) = (gather_f64(&c.x), gather_f64(&c.y));
+            let offs = gather_f64(&c.offset);
+            let slice: Vec<i64> = pav
+                .iter()
+                .map(|&i| pavement::slice_of(c.mileage[i], p.pavement.slice_length_m))
+                .collect();
+            let intensity: Vec<f32> = pav.iter().map(|&i| c.intensity[i]).collect();
+            let scanner: Vec<u8> = pav.iter().map(|&i| c.scanner[i]).collect();
+            let values = rasterize::normalise(
+                &rasterize::BackgroundInput {
+                    intensity: &intensity,
+                    scanner: &scanner,
+                    slice: &slice,
+                    offset: &offs,
+                },
+                &p.rasterize,
+            );
+            let raster = rasterize::idw(&px, &py, &values, &p.rasterize);
+            ctx.stats.add(2, t0);
+            ctx.check()?;
+            ctx.progress.report("threshold", base + 0.5 * step);
+            let t0 = Instant::now();
+            let seg = threshold::segment(&raster, &p.threshold);
+            drop(raster);
+            let marks = threshold::points_from_mask(&seg, &px, &py, &values, &p.threshold);
+            ctx.stats.add(3, t0);
+            ctx.check()?;
+            marks
+        }
+    };
+    let idx: Vec<usize> = pav
+        .iter()
+        .zip(&is_mark)
+        .filter(|&(&i, &m)| m && c.mileage[i] >= core_lo && c.mileage[i] < core_hi)
+        .map(|(&i, _)| i)
+        .collect();
+    ctx.stats.marking_points += idx.len() as u64;
+    let mut cloud = PointCloud::with_origin(origin);
+    cloud.x = idx.iter().map(|&i| c.x[i]).collect();
+    cloud.y = idx.iter().map(|&i| c.y[i]).collect();
+    cloud.z = idx.iter().map(|&i| c.z[i]).collect();
+    cloud.intensity = idx.iter().map(|&i| c.intensity[i]).collect();
+    cloud.gps_time = has_time.then(|| idx.iter().map(|&i| c.gps_time[i]).collect());
+    cloud.scanner = idx.iter().map(|&i| c.scanner[i]).collect();
+    let m = idx.iter().map(|&i| c.mileage[i]).collect();
+    Ok((cloud, m))
+}
+
+// ---------------------------------------------------------------------------------------
+// Streaming clusters across chunk joins
+// ---------------------------------------------------------------------------------------
+
+/// One complete cluster (or piece of a long one): its points and their mileages.
+pub struct Complete {
+    pub points: PointCloud,
+    pub mileage: Vec<f64>,
+}
+
+/// Open clusters carried from one chunk to the next.
+#[derive(Default)]
+pub struct Streaming {
+    open: Option<PointCloud>,
+    open_m: Vec<f64>,
+    /// Per open point: its cluster was already longer than [`PIECE_M`] (so it is cut at
+    /// the piece grid even if the rest alone is shorter).
+    open_long: Vec<bool>,
+}
+
+impl Streaming {
+    /// Add the marking points of the next core. `frontier` is the end of that core
+    /// (`None` for the last chunk: everything completes). `cluster` partitions a cloud.
+    pub fn feed(
+        &mut self,
+        new: PointCloud,
+        new_m: Vec<f64>,
+        frontier: Option<f64>,
+        cluster: impl Fn(&PointCloud, &ValidParams) -> Vec<Vec<usize>>,
+        params: &ValidParams,
+    ) -> Vec<Complete> {
+        let (mut all, mut all_m, mut all_long) = match self.open.take() {
+            Some(open) => (
+                open,
+                std::mem::take(&mut self.open_m),
+                std::mem::take(&mut self.open_long),
+            ),
+            None => (PointCloud::with_origin(new.origin), Vec::new(), Vec::new()),
+        };
+        if all.gps_time.is_none() && all.is_empty() {
+            all.gps_time = new.gps_time.as_ref().map(|_| Vec::new());
+        }
+        all.extend_from(&new);
+        all_m.extend_from_slice(&new_m);
+        all_long.resize(all_m.len(), false);
+        if all.is_empty() {
+            return Vec::new();
+        }
+        // Canonical order: the same points give the same input to `cluster` whatever
+        // the chunking.
+        let mut order: Vec<usize> = (0..all.len()).collect();
+        order.sort_by(|&a, &b| {
+            all.x[a]
+                .total_cmp(&all.x[b])
+                .then(all.y[a].total_cmp(&all.y[b]))
+                .then(all.z[a].total_cmp(&all.z[b]))
+                .then(all.intensity[a].total_cmp(&all.intensity[b]))
+        });
+        let all = all.select(&order);
+        let all_m: Vec<f64> = order.iter().map(|&i| all_m[i]).collect();
+        let all_long: Vec<bool> = order.iter().map(|&i| all_long[i]).collect();
+        let groups = cluster(&all, params);
+
+        let mut complete = Vec::new();
+        let mut keep: Vec<usize> = Vec::new();
+        let mut long_groups: Vec<Vec<usize>> = Vec::new();
+        for g in groups {
+            let lo = g.iter().map(|&i| all_m[i]).fold(f64::INFINITY, f64::min);
+            let hi = g.iter().map(|&i| all_m[i]).fold(f64::NEG_INFINITY, f64::max);
+            let long = hi - lo > PIECE_M || g.iter().any(|&i| all_long[i]);
+            let open = frontier.is_some_and(|f| hi >= f - JOIN_MARGIN_M);
+            if !open {
+                // Complete: cut at the piece grid when long.
+                complete.extend(pieces(&all, &all_m, &g, long));
+                continue;
+            }
+            let f = frontier.expect("open implies a frontier");
+            if long {
+                // Parts below a grid line that lies behind the join margin are final.
+                let safe = ((f - JOIN_MARGIN_M) / PIECE_M).floor() * PIECE_M;
+                let (done, rest): (Vec<usize>, Vec<usize>) = g.iter().partition(|&&i| all_m[i] < safe);
+                complete.extend(pieces(&all, &all_m, &done, true));
+                keep.extend(rest.iter().copied());
+                long_groups.push(rest);
+            } else {
+                keep.extend(g);
+            }
+        }
+        keep.sort_unstable();
+        self.open_m = keep.iter().map(|&i| all_m[i]).collect();
+        // Points of clusters that were long stay marked (see `open_long`).
+        let mut long_pt = vec![false; all.len()];
+        for g in &long_groups {
+            for &i in g {
+                long_pt[i] = true;
+            }
+        }
+        self.open_long = keep.iter().map(|&i| long_pt[i]).collect();
+        self.open = Some(all.select(&keep));
+        complete
+    }
+}
+
+/// A group as one complete cluster, or cut into pieces at multiples of [`PIECE_M`].
+fn pieces(all: &PointCloud, m: &[f64], g: &[usize], cut: bool) -> Vec<Complete> {
+    if g.is_empty() {
+        return Vec::new();
+    }
+    let mut parts: std::collections::BTreeMap<i64, Vec<usize>> = Default::default();
+    for &i in g {
+        let key = if cut { (m[i] / PIECE_M).floor() as i64 } else { 0 };
+        parts.entry(key).or_default().push(i);
+    }
+    parts
+        .into_values()
+        .map(|idx| Complete {
+            points: all.select(&idx),
+            mileage: idx.iter().map(|&i| m[i]).collect(),
+        })
+        .collect()
+}
+
+// ---------------------------------------------------------------------------------------
+// Adapter to the cluster / classify / vectorize stages
+// ---------------------------------------------------------------------------------------
+
+/// Partition marking points into clusters (indices into `cloud`).
+fn cluster_groups(cloud: &PointCloud, _params: &ValidParams) -> Vec<Vec<usize>> {
+    provisional::euclidean(cloud, 0.5)
+}
+
+/// Classify and vectorise complete clusters; returns (sort key = mean mileage, marking).
+fn finish_clusters(
+    ctx: &mut Ctx<'_>,
+    complete: Vec<Complete>,
+    traj: &Trajectory,
+    origin: [f64; 3],
+) -> Result<Vec<(f64, Marking)>, PipelineError> {
+    let t0 = Instant::now();
+    let out = complete
+        .par_iter()
+        .filter_map(|c| {
+            let key = c.mileage.iter().sum::<f64>() / c.mileage.len() as f64;
+            provisional::marking(&c.points, traj, origin).map(|m| (key, m))
+        })
+        .collect();
+    ctx.stats.add(5, t0);
+    Ok(out)
+}
+
+/// Lane lines over all markings of the drive.
+fn link_lane_lines(_markings: &[Marking], _traj: &Trajectory, _params: &ValidParams) -> Vec<LaneLine> {
+    Vec::new()
+}
+
+/// Stand-ins until the vector stages land: Euclidean clustering and a rectangle per
+/// cluster. Replaced by `cluster`, `classify` and `vectorize`.
+mod provisional {
+    use super::super::types::{Marking, MarkingClass, PointCloud, Trajectory};
+    use geo::{Area, MinimumRotatedRect, MultiPoint, Point};
+
+    pub fn euclidean(cloud: &PointCloud, radius: f64) -> Vec<Vec<usize>> {
+        let n = cloud.len();
+        if n == 0 {
+            return Vec::new();
+        }
+        let pts: Vec<[f64; 2]> = (0..n).map(|i| [cloud.x[i], cloud.y[i]]).collect();
+        let tree = kiddo::ImmutableKdTree::<f64, 2>::new_from_slice(&pts).expect("finite points");
+        let mut label = vec![usize::MAX; n];
+        let mut groups = Vec::new();
+        for s in 0..n {
+            if label[s] != usize::MAX {
+                continue;
+            }
+            let id = groups.len();
+            label[s] = id;
+            let mut g = vec![s];
+            let mut k = 0;
+            while k < g.len() {
+                let p = pts[g[k]];
+                for nb in tree
+                    .query(&p)
+                    .within::<kiddo::SquaredEuclidean<f64>>(radius * radius)
+                    .unsorted()
+                    .execute()
+                {
+                    let j = nb.item as usize;
+                    if label[j] == usize::MAX {
+                        label[j] = id;
+                        g.push(j);
+                    }
+                }
+                k += 1;
+            }
+            g.sort_unstable();
+            groups.push(g);
+        }
+        groups
+    }
+
+    pub fn marking(c: &PointCloud, _traj: &Trajectory, origin: [f64; 3]) -> Option<Marking> {
+        if c.len() < 5 {
+            return None;
+        }
+        let mp: MultiPoint<f64> = (0..c.len())
+            .map(|i| Point::new(c.x[i] + origin[0], c.y[i] + origin[1]))
+            .collect();
+        let rect = mp.minimum_rotated_rect()?;
+        let ring: Vec<[f64; 2]> = rect.exterior().points().map(|p| [p.x(), p.y()]).collect();
+        let ring = ring[..ring.len().saturating_sub(1)].to_vec();
+        if ring.len() < 4 {
+            return None;
+        }
+        let e1 = (ring[1][0] - ring[0][0]).hypot(ring[1][1] - ring[0][1]);
+        let e2 = (ring[2][0] - ring[1][0]).hypot(ring[2][1] - ring[1][1]);
+        let (a, b, (dx, dy)) = if e1 >= e2 {
+            (e1, e2, (ring[1][0] - ring[0][0], ring[1][1] - ring[0][1]))
+        } else {
+            (e2, e1, (ring[2][0] - ring[1][0], ring[2][1] - ring[1][1]))
+        };
+        let _ = rect.unsigned_area();
+        let class = if a > 7.0 && a / b.max(0.01) > 20.0 {
+            MarkingClass::SolidLine
+        } else if (1.0..=7.0).contains(&a) && b < 0.4 {
+            MarkingClass::DashedLine
+        } else {
+            MarkingClass::Unknown
+        };
+        let heading = (dx.atan2(dy).to_degrees() + 360.0) % 180.0;
+        Some(Marking {
+            id: String::new(),
+            class,
+            outline: ring,
+            confidence: 0.5,
+            length_m: a,
+            width_m: b,
+            heading_deg: heading,
+            point_count: c.len(),
+        })
+    }
+}
+
+/// Streaming clusters give the same partition whatever the chunk edges (used by tests).
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipeline::params::Params;
+
+    fn cloud(pts: &[(f64, f64)]) -> PointCloud {
+        let mut c = PointCloud::with_origin([0.0; 3]);
+        for &(x, y) in pts {
+            c.push_local(x, y, 0.0, 100.0, None, 0);
+        }
+        c
+    }
+
+    /// Clusters as sorted lists of x coordinates (×1000, rounded), for comparing runs.
+    fn signature(done: &[Complete]) -> Vec<Vec<i64>> {
+        let mut s: Vec<Vec<i64>> = done
+            .iter()
+            .map(|c| {
+                let mut v: Vec<i64> = c.points.x.iter().map(|x| (x * 1000.0).round() as i64).collect();
+                v.sort_unstable();
+                v
+            })
+            .collect();
+        s.sort();
+        s
+    }
+
+    fn run_chunked(pts: &[(f64, f64)], len: f64) -> Vec<Vec<i64>> {
+        let params = Params::default().validate().unwrap();
+        let mut st = Streaming::default();
+        let mut done = Vec::new();
+        let end = pts.iter().map(|p| p.0).fold(0.0, f64::max);
+        let mut lo = 0.0;
+        while lo <= end {
+            let hi = lo + len;
+            let sel: Vec<(f64, f64)> = pts.iter().copied().filter(|p| p.0 >= lo && p.0 < hi).collect();
+            let m: Vec<f64> = sel.iter().map(|p| p.0).collect();
+            let last = hi > end;
+            done.extend(st.feed(cloud(&sel), m, (!last).then_some(hi), cluster_groups, &params));
+            lo = hi;
+        }
+        signature(&done)
+    }
+
+    #[test]
+    fn streaming_clusters_do_not_depend_on_chunk_edges() {
+        // A 600 m solid line (y = 0), dashes (y = 3.5), a cross stripe near x = 120.
+        let mut pts = Vec::new();
+        for i in 0..6000 {
+            pts.push((i as f64 * 0.1, 0.0));
+        }
+        for d in 0..60 {
+            for i in 0..30 {
+                pts.push((d as f64 * 10.0 + i as f64 * 0.1, 3.5));
+            }
+        }
+        for i in 0..30 {
+            pts.push((120.0, 5.0 + i as f64 * 0.1));
+        }
+        let a = run_chunked(&pts, 40.0);
+        let b = run_chunked(&pts, 1000.0);
+        let c = run_chunked(&pts, 77.0);
+        assert_eq!(a, b);
+        assert_eq!(a, c);
+        // The solid line is cut into pieces at multiples of PIECE_M: 0-250, 250-500, 500-600.
+        assert_eq!(a.iter().filter(|g| g.len() >= 1000).count(), 3);
+        assert_eq!(a.len(), 3 + 60 + 1);
+    }
+}

@@ -1,0 +1,608 @@
+//! Small planar geometry helpers shared by the cluster, classify and vectorize stages.
+//!
+//! - [`GridIndex`]: points bucketed in square cells, for radius connectivity (Euclidean
+//!   clustering) and nearest-neighbour spacing without building a tree.
+//! - [`components`]: exact connected components of the "distance ≤ r" graph in O(n) expected
+//!   time (cells of side r/√2 are cliques, so only cell pairs need a point-pair test, and a
+//!   pair already joined is never tested again).
+//! - [`Pca`], [`robust_extent`], [`quantile_sorted`]: the robust principal-axis rectangle used
+//!   for the minimum bounding rectangle (MBR) features of the papers. The extent estimator
+//!   treats the coordinate as uniform over the painted bar, so a few stray points do not
+//!   inflate it (unlike a raw min/max MBR).
+//! - [`local_linear`]: Gaussian-weighted local linear regression (a moving least-squares
+//!   smoother) used for centrelines and offsets.
+//!
+//! Everything here is deterministic for a given input order; callers that need results
+//! independent of the point order sort their points canonically first (see `cluster`).
+
+use std::collections::HashMap;
+
+/// Points bucketed in square cells of side `cell` (sorted by cell, so each cell is a slice).
+pub struct GridIndex {
+    cell: f64,
+    /// Point indices (into the caller's slice) ordered by cell.
+    order: Vec<u32>,
+    /// Cell key → range in `order`.
+    cells: HashMap<(i64, i64), (u32, u32)>,
+    /// Cell keys in sorted order (deterministic iteration).
+    keys: Vec<(i64, i64)>,
+}
+
+impl GridIndex {
+    pub fn new(xy: &[[f64; 2]], cell: f64) -> Self {
+        let key_of = |p: &[f64; 2]| ((p[0] / cell).floor() as i64, (p[1] / cell).floor() as i64);
+        let mut order: Vec<u32> = (0..xy.len() as u32).collect();
+        order.sort_unstable_by_key(|&i| (key_of(&xy[i as usize]), i));
+        let mut cells = HashMap::with_capacity(xy.len() / 4 + 1);
+        let mut keys = Vec::new();
+        let mut start = 0usize;
+        while start < order.len() {
+            let k = key_of(&xy[order[start] as usize]);
+            let mut end = start + 1;
+            while end < order.len() && key_of(&xy[order[end] as usize]) == k {
+                end += 1;
+            }
+            cells.insert(k, (start as u32, end as u32));
+            keys.push(k);
+            start = end;
+        }
+        Self {
+            cell,
+            order,
+            cells,
+            keys,
+        }
+    }
+
+    fn slice(&self, k: (i64, i64)) -> Option<&[u32]> {
+        self.cells
+            .get(&k)
+            .map(|&(a, b)| &self.order[a as usize..b as usize])
+    }
+
+    /// Distance to the nearest other point within `max_r` (None when there is none).
+    pub fn nearest_other(&self, xy: &[[f64; 2]], i: usize, max_r: f64) -> Option<f64> {
+        let p = xy[i];
+        let (kx, ky) = (
+            (p[0] / self.cell).floor() as i64,
+            (p[1] / self.cell).floor() as i64,
+        );
+        let rings = (max_r / self.cell).ceil() as i64;
+        let mut best = f64::INFINITY;
+        for ring in 0..=rings {
+            // Once a candidate is closer than the inner edge of this ring, stop.
+            if best <= (ring - 1).max(0) as f64 * self.cell {
+                break;
+            }
+            for dx in -ring..=ring {
+                for dy in -ring..=ring {
+                    if dx.abs() != ring && dy.abs() != ring {
+                        continue;
+                    }
+                    if let Some(s) = self.slice((kx + dx, ky + dy)) {
+                        for &j in s {
+                            if j as usize != i {
+                                let q = xy[j as usize];
+                                best = best.min((q[0] - p[0]).hypot(q[1] - p[1]));
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        (best <= max_r).then_some(best)
+    }
+}
+
+/// Exact connected components of the graph joining points closer than or at `r`.
+///
+/// Returns groups of indices into `xy`, each sorted ascending, groups ordered by their first
+/// index. Cells have side r/√2 (slightly less), so all points of one cell are connected and
+/// the union-find runs over cells; a neighbouring cell pair is tested point by point only
+/// while the two cells are not yet in the same component, with an early exit on the first
+/// pair within `r`.
+pub fn components(xy: &[[f64; 2]], r: f64) -> Vec<Vec<usize>> {
+    if xy.is_empty() {
+        return Vec::new();
+    }
+    let cell = r / std::f64::consts::SQRT_2 * 0.999;
+    let grid = GridIndex::new(xy, cell);
+    let ncell = grid.keys.len();
+    let cell_id: HashMap<(i64, i64), usize> = grid.keys.iter().enumerate().map(|(i, &k)| (k, i)).collect();
+    let mut parent: Vec<usize> = (0..ncell).collect();
+    fn find(parent: &mut [usize], mut a: usize) -> usize {
+        while parent[a] != a {
+            parent[a] = parent[parent[a]];
+            a = parent[a];
+        }
+        a
+    }
+    let r2 = r * r;
+    let reach = (r / cell).ceil() as i64;
+    for (ia, &ka) in grid.keys.iter().enumerate() {
+        let sa = grid.slice(ka).expect("cell exists");
+        for dx in 0..=reach {
+            for dy in -reach..=reach {
+                if dx == 0 && dy <= 0 {
+                    continue; // each unordered pair once
+                }
+                let gx = (dx.abs() - 1).max(0) as f64 * cell;
+                let gy = (dy.abs() - 1).max(0) as f64 * cell;
+                if gx * gx + gy * gy > r2 {
+                    continue;
+                }
+                let kb = (ka.0 + dx, ka.1 + dy);
+                let Some(&ib) = cell_id.get(&kb) else { continue };
+                let (ra, rb) = (find(&mut parent, ia), find(&mut parent, ib));
+                if ra == rb {
+                    continue;
+                }
+                let sb = grid.slice(kb).expect("cell exists");
+                let joined = sa.iter().any(|&i| {
+                    let p = xy[i as usize];
+                    sb.iter().any(|&j| {
+                        let q = xy[j as usize];
+                        let (ex, ey) = (q[0] - p[0], q[1] - p[1]);
+                        ex * ex + ey * ey <= r2
+                    })
+                });
+                if joined {
+                    parent[ra.max(rb)] = ra.min(rb);
+                }
+            }
+        }
+    }
+    let mut groups: HashMap<usize, Vec<usize>> = HashMap::new();
+    for (ic, &k) in grid.keys.iter().enumerate() {
+        let root = find(&mut parent, ic);
+        groups
+            .entry(root)
+            .or_default()
+            .extend(grid.slice(k).expect("cell exists").iter().map(|&i| i as usize));
+    }
+    let mut out: Vec<Vec<usize>> = groups
+        .into_values()
+        .map(|mut g| {
+            g.sort_unstable();
+            g
+        })
+        .collect();
+    out.sort_unstable_by_key(|g| g[0]);
+    out
+}
+
+/// Median nearest-neighbour distance of (a deterministic subsample of) the points; a proxy
+/// for the point spacing. `None` with fewer than 2 points or no neighbour within `max_r`.
+pub fn spacing(xy: &[[f64; 2]], max_r: f64) -> Option<f64> {
+    if xy.len() < 2 {
+        return None;
+    }
+    let grid = GridIndex::new(xy, (max_r / 4.0).max(0.01));
+    let stride = (xy.len() / 256).max(1);
+    let mut d: Vec<f64> = (0..xy.len())
+        .step_by(stride)
+        .filter_map(|i| grid.nearest_other(xy, i, max_r))
+        .collect();
+    if d.is_empty() {
+        return None;
+    }
+    d.sort_unstable_by(f64::total_cmp);
+    Some(quantile_sorted(&d, 0.5))
+}
+
+/// Quantile `q` in 0..=1 of sorted values, linearly interpolated. NaN when empty.
+pub fn quantile_sorted(v: &[f64], q: f64) -> f64 {
+    match v.len() {
+        0 => f64::NAN,
+        1 => v[0],
+        n => {
+            let pos = q.clamp(0.0, 1.0) * (n - 1) as f64;
+            let i = pos.floor() as usize;
+            let f = pos - i as f64;
+            if i + 1 < n {
+                v[i] * (1.0 - f) + v[i + 1] * f
+            } else {
+                v[n - 1]
+            }
+        }
+    }
+}
+
+/// Median of the values (sorts them in place). NaN when empty.
+pub fn median(v: &mut [f64]) -> f64 {
+    v.sort_unstable_by(f64::total_cmp);
+    quantile_sorted(v, 0.5)
+}
+
+/// Estimated extent (lo, hi) of the interval a sample was drawn from, treating the sample as
+/// uniform over it: trimmed quantiles rescaled for large samples (robust to a few strays),
+/// the range widened by one mean gap for small ones. `v` must be sorted and non-empty.
+pub fn robust_extent(v: &[f64]) -> (f64, f64) {
+    let n = v.len();
+    if n < 40 {
+        let (lo, hi) = (v[0], v[n - 1]);
+        let pad = if n > 1 {
+            (hi - lo) / (n - 1) as f64 / 2.0
+        } else {
+            0.0
+        };
+        return (lo - pad, hi + pad);
+    }
+    let p = if n >= 100 { 0.02 } else { 0.01 };
+    let (a, b) = (quantile_sorted(v, p), quantile_sorted(v, 1.0 - p));
+    let half = (b - a) / (1.0 - 2.0 * p) / 2.0;
+    let c = (a + b) / 2.0;
+    (c - half, c + half)
+}
+
+/// Principal axes of a planar point set.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pca {
+    pub center: [f64; 2],
+    /// Unit long axis, sign made canonical (x > 0, or y > 0 when x = 0).
+    pub axis: [f64; 2],
+    /// Variance along the long axis and across it.
+    pub var: [f64; 2],
+}
+
+impl Pca {
+    pub fn of(xy: &[[f64; 2]]) -> Pca {
+        let n = xy.len().max(1) as f64;
+        let (mut sx, mut sy) = (0.0, 0.0);
+        for p in xy {
+            sx += p[0];
+            sy += p[1];
+        }
+        let c = [sx / n, sy / n];
+        let (mut xx, mut xy_, mut yy) = (0.0, 0.0, 0.0);
+        for p in xy {
+            let (dx, dy) = (p[0] - c[0], p[1] - c[1]);
+            xx += dx * dx;
+            xy_ += dx * dy;
+            yy += dy * dy;
+        }
+        let (xx, xy_, yy) = (xx / n, xy_ / n, yy / n);
+        let theta = 0.5 * (2.0 * xy_).atan2(xx - yy);
+        let axis = canonical([theta.cos(), theta.sin()]);
+        let tr = xx + yy;
+        let det = xx * yy - xy_ * xy_;
+        let disc = (tr * tr / 4.0 - det).max(0.0).sqrt();
+        Pca {
+            center: c,
+            axis,
+            var: [tr / 2.0 + disc, (tr / 2.0 - disc).max(0.0)],
+        }
+    }
+
+    /// (along, across) coordinates of `p` in this frame.
+    pub fn to_frame(&self, p: [f64; 2]) -> [f64; 2] {
+        let (dx, dy) = (p[0] - self.center[0], p[1] - self.center[1]);
+        [
+            dx * self.axis[0] + dy * self.axis[1],
+            -dx * self.axis[1] + dy * self.axis[0],
+        ]
+    }
+
+    pub fn from_frame(&self, uv: [f64; 2]) -> [f64; 2] {
+        [
+            self.center[0] + uv[0] * self.axis[0] - uv[1] * self.axis[1],
+            self.center[1] + uv[0] * self.axis[1] + uv[1] * self.axis[0],
+        ]
+    }
+}
+
+/// A unit vector with a canonical sign (x > 0, or y > 0 when x = 0).
+pub fn canonical(a: [f64; 2]) -> [f64; 2] {
+    if a[0] < 0.0 || (a[0] == 0.0 && a[1] < 0.0) {
+        [-a[0], -a[1]]
+    } else {
+        a
+    }
+}
+
+/// Acute angle in degrees (0..=90) between two undirected unit directions.
+pub fn acute_angle_deg(a: [f64; 2], b: [f64; 2]) -> f64 {
+    (a[0] * b[0] + a[1] * b[1]).abs().min(1.0).acos().to_degrees()
+}
+
+/// Gaussian-weighted local linear regression of `y` on `x` at `x0` with bandwidth `h`,
+/// widened until at least `min_w` total weight (about that many samples) is in reach.
+/// `xs` must be sorted. Returns (value, slope); None when `xs` is empty.
+pub fn local_linear(xs: &[f64], ys: &[f64], ws: &[f64], x0: f64, h: f64, min_w: f64) -> Option<(f64, f64)> {
+    if xs.is_empty() {
+        return None;
+    }
+    let mut h = h;
+    for _ in 0..12 {
+        let lo = xs.partition_point(|&x| x < x0 - 3.0 * h);
+        let hi = xs.partition_point(|&x| x <= x0 + 3.0 * h);
+        let (mut s0, mut s1, mut s2, mut t0, mut t1) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        let mut count = 0.0;
+        for i in lo..hi {
+            let d = xs[i] - x0;
+            let w = ws[i] * (-0.5 * (d / h) * (d / h)).exp();
+            s0 += w;
+            s1 += w * d;
+            s2 += w * d * d;
+            t0 += w * ys[i];
+            t1 += w * d * ys[i];
+            count += ws[i];
+        }
+        if count >= min_w && s0 > 0.0 {
+            let det = s0 * s2 - s1 * s1;
+            // Degenerate spread (all samples at one x): fall back to the weighted mean.
+            if det.abs() <= 1e-12 * s0 * s0 * h * h {
+                return Some((t0 / s0, 0.0));
+            }
+            let b = (s0 * t1 - s1 * t0) / det;
+            let a = (t0 - b * s1) / s0;
+            return Some((a, b));
+        }
+        h *= 1.6;
+    }
+    // Still too few samples in reach: weighted mean of everything.
+    let sw: f64 = ws.iter().sum();
+    let sy: f64 = ws.iter().zip(ys).map(|(w, y)| w * y).sum();
+    (sw > 0.0).then_some((sy / sw, 0.0))
+}
+
+/// Gaussian-weighted local quadratic regression of `y` on `x` at `x0` (bandwidth widened
+/// like [`local_linear`] until `min_w` weight is in reach); falls back to the local linear
+/// fit when the quadratic system is singular. `xs` must be sorted.
+pub fn local_quadratic(xs: &[f64], ys: &[f64], ws: &[f64], x0: f64, h: f64, min_w: f64) -> Option<f64> {
+    if xs.is_empty() {
+        return None;
+    }
+    let mut h = h;
+    for _ in 0..12 {
+        let lo = xs.partition_point(|&x| x < x0 - 3.0 * h);
+        let hi = xs.partition_point(|&x| x <= x0 + 3.0 * h);
+        let count: f64 = ws[lo..hi].iter().sum();
+        if count >= min_w {
+            let mut m = [[0.0f64; 3]; 3];
+            let mut r = [0.0f64; 3];
+            for i in lo..hi {
+                let d = (xs[i] - x0) / h;
+                let w = ws[i] * (-0.5 * d * d).exp();
+                let b = [1.0, d, d * d];
+                for a in 0..3 {
+                    r[a] += w * b[a] * ys[i];
+                    for c in 0..3 {
+                        m[a][c] += w * b[a] * b[c];
+                    }
+                }
+            }
+            let mat = nalgebra::Matrix3::from_fn(|a, c| m[a][c]);
+            if let Some(inv) = mat.try_inverse() {
+                let sol = inv * nalgebra::Vector3::new(r[0], r[1], r[2]);
+                if sol[0].is_finite() && mat.determinant().abs() > 1e-9 * m[0][0].powi(3) {
+                    return Some(sol[0]);
+                }
+            }
+            return local_linear(xs, ys, ws, x0, h, min_w).map(|v| v.0);
+        }
+        h *= 1.6;
+    }
+    local_linear(xs, ys, ws, x0, h, min_w).map(|v| v.0)
+}
+
+/// Douglas–Peucker simplification of an open polyline (keeps both ends).
+pub fn simplify(line: &[[f64; 2]], tol: f64) -> Vec<[f64; 2]> {
+    if line.len() <= 2 {
+        return line.to_vec();
+    }
+    let mut keep = vec![false; line.len()];
+    keep[0] = true;
+    keep[line.len() - 1] = true;
+    let mut stack = vec![(0usize, line.len() - 1)];
+    while let Some((a, b)) = stack.pop() {
+        let (p, q) = (line[a], line[b]);
+        let (dx, dy) = (q[0] - p[0], q[1] - p[1]);
+        let len = dx.hypot(dy);
+        let mut best = (0.0, 0usize);
+        for (i, r) in line.iter().enumerate().take(b).skip(a + 1) {
+            let d = if len > 0.0 {
+                ((r[0] - p[0]) * dy - (r[1] - p[1]) * dx).abs() / len
+            } else {
+                (r[0] - p[0]).hypot(r[1] - p[1])
+            };
+            if d > best.0 {
+                best = (d, i);
+            }
+        }
+        if best.0 > tol {
+            keep[best.1] = true;
+            stack.push((a, best.1));
+            stack.push((best.1, b));
+        }
+    }
+    line.iter()
+        .zip(keep)
+        .filter_map(|(p, k)| k.then_some(*p))
+        .collect()
+}
+
+/// Length of an open polyline.
+pub fn polyline_length(line: &[[f64; 2]]) -> f64 {
+    line.windows(2)
+        .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
+        .sum()
+}
+
+/// Robust rectangle of a point set in its principal frame, with a fill ratio.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BarShape {
+    pub pca: Pca,
+    /// Estimated extent along the long axis and across it, in frame coordinates.
+    pub u: (f64, f64),
+    pub v: (f64, f64),
+    /// Mean slice width over the full width (1 for a filled bar, ~0.5 for a triangle).
+    pub fill: f64,
+}
+
+impl BarShape {
+    pub fn of(xy: &[[f64; 2]]) -> BarShape {
+        let pca = Pca::of(xy);
+        let mut uv: Vec<[f64; 2]> = xy.iter().map(|&p| pca.to_frame(p)).collect();
+        let mut us: Vec<f64> = uv.iter().map(|p| p[0]).collect();
+        let mut vs: Vec<f64> = uv.iter().map(|p| p[1]).collect();
+        us.sort_unstable_by(f64::total_cmp);
+        vs.sort_unstable_by(f64::total_cmp);
+        if xy.is_empty() {
+            return BarShape {
+                pca,
+                u: (0.0, 0.0),
+                v: (0.0, 0.0),
+                fill: 0.0,
+            };
+        }
+        let u = robust_extent(&us);
+        let v = robust_extent(&vs);
+        let (len, wid) = (u.1 - u.0, v.1 - v.0);
+        let fill = if wid > 0.0 && len > 0.0 && xy.len() >= 8 {
+            let nsl = ((xy.len() / 6).clamp(2, 20)).min(((len / 0.05) as usize).max(2));
+            let dl = len / nsl as f64;
+            uv.sort_unstable_by(|a, b| a[0].total_cmp(&b[0]));
+            let mut total = 0.0;
+            let mut cur: Vec<f64> = Vec::new();
+            let mut k = 0usize;
+            let flush = |cur: &mut Vec<f64>, total: &mut f64| {
+                if cur.len() >= 2 {
+                    cur.sort_unstable_by(f64::total_cmp);
+                    let (a, b) = robust_extent(cur);
+                    *total += (b - a).min(wid);
+                }
+                cur.clear();
+            };
+            for p in &uv {
+                let kk = (((p[0] - u.0) / dl).floor().max(0.0) as usize).min(nsl - 1);
+                if kk != k {
+                    flush(&mut cur, &mut total);
+                    k = kk;
+                }
+                cur.push(p[1]);
+            }
+            flush(&mut cur, &mut total);
+            (total / nsl as f64 / wid).clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
+        BarShape { pca, u, v, fill }
+    }
+
+    pub fn length(&self) -> f64 {
+        self.u.1 - self.u.0
+    }
+
+    pub fn width(&self) -> f64 {
+        self.v.1 - self.v.0
+    }
+
+    /// Centre of the robust rectangle (not the centroid).
+    pub fn center(&self) -> [f64; 2] {
+        self.pca
+            .from_frame([(self.u.0 + self.u.1) / 2.0, (self.v.0 + self.v.1) / 2.0])
+    }
+
+    /// The four corners of the robust rectangle.
+    pub fn corners(&self) -> [[f64; 2]; 4] {
+        let f = |u, v| self.pca.from_frame([u, v]);
+        [
+            f(self.u.0, self.v.0),
+            f(self.u.1, self.v.0),
+            f(self.u.1, self.v.1),
+            f(self.u.0, self.v.1),
+        ]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn components_of_degenerate_inputs() {
+        assert!(components(&[], 0.3).is_empty());
+        assert_eq!(components(&[[1.0, 2.0]], 0.3), vec![vec![0]]);
+        // Exactly at the radius is connected; just beyond is not.
+        let c = components(&[[0.0, 0.0], [0.3, 0.0], [0.6000001, 0.0]], 0.3);
+        assert_eq!(c, vec![vec![0, 1], vec![2]]);
+        // Duplicates and collinear points.
+        let pts: Vec<[f64; 2]> = (0..50)
+            .map(|i| [i as f64 * 0.1, 0.0])
+            .chain([[0.0, 0.0]])
+            .collect();
+        assert_eq!(components(&pts, 0.15).len(), 1);
+    }
+
+    #[test]
+    fn components_match_brute_force() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let pts: Vec<[f64; 2]> = (0..400)
+            .map(|_| [rng.random_range(0.0..10.0), rng.random_range(0.0..10.0)])
+            .collect();
+        let r = 0.4;
+        // Brute force union-find.
+        let mut lab: Vec<usize> = (0..pts.len()).collect();
+        fn f(l: &mut [usize], mut a: usize) -> usize {
+            while l[a] != a {
+                a = l[a];
+            }
+            a
+        }
+        for i in 0..pts.len() {
+            for j in 0..i {
+                if (pts[i][0] - pts[j][0]).hypot(pts[i][1] - pts[j][1]) <= r {
+                    let (a, b) = (f(&mut lab, i), f(&mut lab, j));
+                    lab[a.max(b)] = a.min(b);
+                }
+            }
+        }
+        let mut groups: HashMap<usize, Vec<usize>> = HashMap::new();
+        for i in 0..pts.len() {
+            let root = f(&mut lab, i);
+            groups.entry(root).or_default().push(i);
+        }
+        let mut want: Vec<Vec<usize>> = groups.into_values().collect();
+        want.sort_unstable_by_key(|g| g[0]);
+        assert_eq!(components(&pts, r), want);
+    }
+
+    #[test]
+    fn robust_extent_ignores_a_stray_point() {
+        let mut v: Vec<f64> = (0..=1000).map(|i| i as f64 * 0.006).collect(); // 0..6 m
+        v.push(9.0);
+        v.sort_unstable_by(f64::total_cmp);
+        let (lo, hi) = robust_extent(&v);
+        assert!((hi - lo - 6.0).abs() < 0.15, "{lo} {hi}");
+        let (lo, hi) = robust_extent(&[1.0, 2.0, 3.0]);
+        assert!((lo - 0.5).abs() < 1e-12 && (hi - 3.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn pca_and_local_linear() {
+        let pts: Vec<[f64; 2]> = (0..100)
+            .map(|i| [i as f64 * 0.1 * 0.6, -(i as f64) * 0.1 * 0.8])
+            .collect();
+        let p = Pca::of(&pts);
+        assert!((p.axis[0] - 0.6).abs() < 1e-9 && (p.axis[1] + 0.8).abs() < 1e-9);
+        let uv = p.to_frame(pts[10]);
+        let back = p.from_frame(uv);
+        assert!((back[0] - pts[10][0]).abs() < 1e-12);
+        let xs: Vec<f64> = (0..20).map(|i| i as f64).collect();
+        let ys: Vec<f64> = xs.iter().map(|x| 2.0 + 0.5 * x).collect();
+        let ws = vec![1.0; 20];
+        let (a, b) = local_linear(&xs, &ys, &ws, 7.3, 1.0, 3.0).unwrap();
+        assert!((a - (2.0 + 0.5 * 7.3)).abs() < 1e-9 && (b - 0.5).abs() < 1e-9);
+        // Far outside the samples the bandwidth widens instead of failing.
+        assert!(local_linear(&xs, &ys, &ws, 100.0, 1.0, 3.0).is_some());
+    }
+
+    #[test]
+    fn simplify_keeps_corners() {
+        let l = vec![[0.0, 0.0], [1.0, 0.001], [2.0, 0.0], [2.0, 1.0]];
+        assert_eq!(simplify(&l, 0.01), vec![[0.0, 0.0], [2.0, 0.0], [2.0, 1.0]]);
+        assert!((polyline_length(&l) - 3.0).abs() < 1e-3);
+    }
+}

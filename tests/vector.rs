@@ -1,0 +1,626 @@
+//! Cluster → classify → vectorize on hand-made point sets and on the real Rovereto drive.
+//!
+//! Numbers are printed (run with `--nocapture`) so accuracy can be read off:
+//! `cargo test --test vector -- --nocapture`.
+
+use roadmark::pipeline::types::{
+    LaneLine, LaneLineClass, Marking, MarkingClass, PointCloud, Pose, Trajectory,
+};
+use roadmark::pipeline::{classify, cluster, outline, vectorize};
+
+fn pose(t: f64, x: f64, y: f64) -> Pose {
+    Pose {
+        time: t,
+        x,
+        y,
+        z: 0.0,
+        heading_deg: None,
+        roll_deg: None,
+        pitch_deg: None,
+    }
+}
+
+/// Deterministic pseudo-random numbers in [0, 1) (no dependency on the rand API here).
+struct Lcg(u64);
+impl Lcg {
+    fn next(&mut self) -> f64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+    fn gauss(&mut self) -> f64 {
+        let (u, v) = (self.next().max(1e-12), self.next());
+        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+    }
+}
+
+/// A road centre path: straight along +x (radius None) or an arc of radius R turning left.
+#[derive(Clone, Copy)]
+struct Path {
+    radius: Option<f64>,
+}
+
+impl Path {
+    /// Point at arc length `s` along the path, offset `o` to the left.
+    fn at(&self, s: f64, o: f64) -> [f64; 2] {
+        match self.radius {
+            None => [s, o],
+            Some(r) => {
+                let a = s / r;
+                [(r - o) * a.sin(), r - (r - o) * a.cos()]
+            }
+        }
+    }
+    /// Arc length along the line at offset `o` corresponding to path arc length `s`.
+    fn line_s(&self, s: f64, o: f64) -> f64 {
+        match self.radius {
+            None => s,
+            Some(r) => s * (r - o) / r,
+        }
+    }
+    /// Signed distance of `p` from the line at offset `o` (positive to the left).
+    fn line_error(&self, p: [f64; 2], o: f64) -> f64 {
+        match self.radius {
+            None => p[1] - o,
+            Some(r) => (r - o) - p[0].hypot(p[1] - r),
+        }
+    }
+}
+
+/// Painted things in the path frame: (offset of the line centre, width, painted intervals
+/// along the line's own arc length).
+struct Paint {
+    offset: f64,
+    width: f64,
+    intervals: Vec<(f64, f64)>,
+}
+
+/// A dashed line: dash/gap pattern from `start` to `end`, skipping `holes`.
+fn dashes(offset: f64, width: f64, dash: f64, gap: f64, start: f64, end: f64, holes: &[(f64, f64)]) -> Paint {
+    let mut iv = Vec::new();
+    let mut s = start;
+    while s + dash <= end {
+        if !holes.iter().any(|h| s + dash > h.0 && s < h.1) {
+            iv.push((s, s + dash));
+        }
+        s += dash + gap;
+    }
+    Paint {
+        offset,
+        width,
+        intervals: iv,
+    }
+}
+
+/// Scan the paint like an MLS profiler: profiles every 0.05 m along the path, points every
+/// 0.02 m across, 5 mm jitter, 10 % dropouts. Returns the cloud (local = absolute minus an
+/// origin far away, as with UTM data) and the trajectory (absolute), weaving ±0.15 m.
+fn scan(path: Path, length: f64, paint: &[Paint], seed: u64) -> (PointCloud, Trajectory) {
+    scan_occluded(path, length, paint, &[], seed)
+}
+
+/// Like [`scan`], with no points at all in the `occluded` path intervals (a parked truck).
+fn scan_occluded(
+    path: Path,
+    length: f64,
+    paint: &[Paint],
+    occluded: &[(f64, f64)],
+    seed: u64,
+) -> (PointCloud, Trajectory) {
+    let origin = [500_000.0, 4_000_000.0, 0.0];
+    let mut rng = Lcg(seed);
+    let mut cloud = PointCloud::with_origin(origin);
+    let mut s = 0.0;
+    while s <= length {
+        if occluded.iter().any(|h| s >= h.0 && s < h.1) {
+            s += 0.05;
+            continue;
+        }
+        for pt in paint {
+            let ls = path.line_s(s, pt.offset);
+            if !pt.intervals.iter().any(|iv| ls >= iv.0 && ls < iv.1) {
+                continue;
+            }
+            let n = (pt.width / 0.02).round() as i64;
+            for j in 0..=n {
+                if rng.next() < 0.1 {
+                    continue;
+                }
+                let o = pt.offset - pt.width / 2.0 + pt.width * j as f64 / n as f64;
+                let p = path.at(s, o);
+                cloud.push_local(
+                    p[0] + 0.005 * rng.gauss(),
+                    p[1] + 0.005 * rng.gauss(),
+                    0.0,
+                    40000.0,
+                    None,
+                    0,
+                );
+            }
+        }
+        s += 0.05;
+    }
+    let poses: Vec<Pose> = (0..=(length as usize + 20))
+        .map(|i| {
+            let s = i as f64 - 10.0;
+            let w = 0.15 * (s / 80.0 * std::f64::consts::TAU).sin();
+            let p = path.at(s, w);
+            pose(i as f64 * 0.1, p[0] + origin[0], p[1] + origin[1])
+        })
+        .collect();
+    (cloud, Trajectory::new(poses).expect("valid trajectory"))
+}
+
+struct Out {
+    markings: Vec<Marking>,
+    lanes: Vec<LaneLine>,
+    candidates: Vec<classify::Candidate>,
+}
+
+fn pipeline(cloud: &PointCloud, traj: &Trajectory) -> Out {
+    let local = traj.to_local(cloud.origin);
+    let clusters = cluster::run(cloud, &cluster::Params::default());
+    let candidates = classify::run(cloud, &clusters, &local, &classify::Params::default());
+    let (markings, lanes) = vectorize::run(cloud, &candidates, &local, &vectorize::Params::default());
+    Out {
+        markings,
+        lanes,
+        candidates,
+    }
+}
+
+/// Max and RMS distance of a lane line (densified every 0.1 m) from the true line at `o`,
+/// with the origin removed; also the covered path length.
+fn line_errors(l: &LaneLine, path: Path, o: f64, origin: [f64; 3]) -> (f64, f64) {
+    let mut errs = Vec::new();
+    for w in l.line.windows(2) {
+        let (a, b) = (
+            [w[0][0] - origin[0], w[0][1] - origin[1]],
+            [w[1][0] - origin[0], w[1][1] - origin[1]],
+        );
+        let len = (b[0] - a[0]).hypot(b[1] - a[1]);
+        let k = (len / 0.1).ceil().max(1.0) as usize;
+        for i in 0..k {
+            let f = i as f64 / k as f64;
+            errs.push(path.line_error([a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1])], o));
+        }
+    }
+    let max = errs.iter().fold(0.0f64, |m, e| m.max(e.abs()));
+    let rms = (errs.iter().map(|e| e * e).sum::<f64>() / errs.len().max(1) as f64).sqrt();
+    (max, rms)
+}
+
+fn count(ms: &[Marking], c: MarkingClass) -> usize {
+    ms.iter().filter(|m| m.class == c).count()
+}
+
+#[test]
+fn empty_and_tiny_inputs_give_empty_results() {
+    let traj = Trajectory::new(vec![pose(0.0, 0.0, 0.0), pose(1.0, 10.0, 0.0)]).unwrap();
+    let out = pipeline(&PointCloud::default(), &traj);
+    assert!(out.markings.is_empty() && out.lanes.is_empty());
+    let mut one = PointCloud::default();
+    one.push_local(1.0, 1.0, 0.0, 1.0, None, 0);
+    let out = pipeline(&one, &traj);
+    assert!(out.markings.is_empty() && out.lanes.is_empty());
+    // Collinear points along the road (a thin 3 m streak with zero width).
+    let mut line = PointCloud::default();
+    for i in 0..100 {
+        line.push_local(i as f64 * 0.03, 2.0, 0.0, 1.0, None, 0);
+    }
+    let out = pipeline(&line, &traj);
+    assert!(out.lanes.is_empty());
+    for m in &out.markings {
+        assert!(m.outline.len() >= 3 && m.outline.iter().all(|p| p[0].is_finite() && p[1].is_finite()));
+    }
+}
+
+#[test]
+fn straight_road_dashes_solid_and_parallel_lines_never_joined() {
+    let path = Path { radius: None };
+    let paint = vec![
+        Paint {
+            offset: -1.75,
+            width: 0.15,
+            intervals: vec![(0.0, 120.0)],
+        },
+        dashes(1.75, 0.15, 6.0, 9.0, 2.0, 120.0, &[]),
+        dashes(5.25, 0.15, 6.0, 9.0, 5.0, 120.0, &[]),
+    ];
+    let (cloud, traj) = scan(path, 120.0, &paint, 1);
+    let out = pipeline(&cloud, &traj);
+    let n_dash = paint[1].intervals.len() + paint[2].intervals.len();
+    eprintln!(
+        "straight: {} markings ({} dashed, {} solid), {} lane lines",
+        out.markings.len(),
+        count(&out.markings, MarkingClass::DashedLine),
+        count(&out.markings, MarkingClass::SolidLine),
+        out.lanes.len()
+    );
+    assert_eq!(count(&out.markings, MarkingClass::DashedLine), n_dash);
+    assert_eq!(count(&out.markings, MarkingClass::SolidLine), 1);
+    assert_eq!(out.lanes.len(), 3, "one lane line per painted line");
+    for (l, (o, class)) in out.lanes.iter().zip([
+        (-1.75, LaneLineClass::SolidLine),
+        (1.75, LaneLineClass::DashedLine),
+        (5.25, LaneLineClass::DashedLine),
+    ]) {
+        // Lane lines are ordered by mileage then offset; find the right truth by offset.
+        let _ = (o, class);
+        let y = l.line[0][1] - cloud.origin[1];
+        let (o, class) = [
+            (-1.75, LaneLineClass::SolidLine),
+            (1.75, LaneLineClass::DashedLine),
+            (5.25, LaneLineClass::DashedLine),
+        ]
+        .into_iter()
+        .min_by(|a, b| (a.0 - y).abs().total_cmp(&(b.0 - y).abs()))
+        .unwrap();
+        let (max, rms) = line_errors(l, path, o, cloud.origin);
+        eprintln!(
+            "  lane {} {:?} at {o}: {} pieces, max {max:.4} m, rms {rms:.4} m, length {:.1}",
+            l.id,
+            l.class,
+            l.marking_ids.len(),
+            l.length_m
+        );
+        assert_eq!(l.class, class);
+        assert!(
+            max < 0.05 && rms < 0.02,
+            "lane line off the paint: max {max}, rms {rms}"
+        );
+    }
+    // Ids are m1.. / l1.. and every marking id referenced by a lane line exists.
+    for l in &out.lanes {
+        for id in &l.marking_ids {
+            assert!(out.markings.iter().any(|m| &m.id == id));
+        }
+    }
+    // Dash sizes.
+    for m in out
+        .markings
+        .iter()
+        .filter(|m| m.class == MarkingClass::DashedLine)
+    {
+        assert!(
+            (m.length_m - 6.0).abs() < 0.2 && (m.width_m - 0.15).abs() < 0.05,
+            "{m:?}"
+        );
+        assert!(
+            (m.heading_deg - 90.0).abs() < 1.0,
+            "heading along +x is east: {}",
+            m.heading_deg
+        );
+    }
+}
+
+#[test]
+fn curved_dashed_line_follows_the_arc() {
+    // R = 100 m, GB 6/9 m dashes 1.75 m left of the path, solid edge 1.75 m right.
+    let path = Path { radius: Some(100.0) };
+    let paint = vec![
+        dashes(1.75, 0.15, 6.0, 9.0, 0.0, 150.0, &[]),
+        Paint {
+            offset: -1.75,
+            width: 0.15,
+            intervals: vec![(0.0, 150.0)],
+        },
+    ];
+    let (cloud, traj) = scan(path, 150.0, &paint, 2);
+    let out = pipeline(&cloud, &traj);
+    assert_eq!(
+        out.lanes.len(),
+        2,
+        "{:?}",
+        out.lanes.iter().map(|l| l.length_m).collect::<Vec<_>>()
+    );
+    for l in &out.lanes {
+        let o = if l.class == LaneLineClass::DashedLine {
+            1.75
+        } else {
+            -1.75
+        };
+        let (max, rms) = line_errors(l, path, o, cloud.origin);
+        eprintln!(
+            "curve R=100: lane {:?} max {max:.4} m rms {rms:.4} m length {:.1} m",
+            l.class, l.length_m
+        );
+        assert!(max <= 0.05, "lane line must stay within 0.05 m of the arc: {max}");
+    }
+    // The solid line on the curve is one piece with a curved outline (not a fat rectangle).
+    let solid: Vec<&Marking> = out
+        .markings
+        .iter()
+        .filter(|m| m.class == MarkingClass::SolidLine)
+        .collect();
+    assert_eq!(solid.len(), 1);
+    assert!(
+        (solid[0].width_m - 0.15).abs() < 0.05,
+        "width {}",
+        solid[0].width_m
+    );
+    assert!(outline::area(&solid[0].outline) < 150.0 * 0.25);
+}
+
+#[test]
+fn twenty_metres_of_occlusion_stay_one_lane_line() {
+    let path = Path { radius: Some(400.0) };
+    // 20 m without any point, starting mid-dash: the pieces on both sides are 20–29 m apart.
+    let paint = vec![dashes(1.75, 0.15, 6.0, 9.0, 0.0, 200.0, &[])];
+    let (cloud, traj) = scan_occluded(path, 200.0, &paint, &[(78.0, 98.0)], 3);
+    let out = pipeline(&cloud, &traj);
+    assert_eq!(out.lanes.len(), 1);
+    let l = &out.lanes[0];
+    let (max, rms) = line_errors(l, path, 1.75, cloud.origin);
+    eprintln!(
+        "occlusion: {} pieces, length {:.1}, max {max:.4} rms {rms:.4}",
+        l.marking_ids.len(),
+        l.length_m
+    );
+    // Dashes 75–81 and 90–96 are cut by the occlusion: 75–78 remains, 90–96 is gone.
+    assert_eq!(l.marking_ids.len(), paint[0].intervals.len() - 1);
+    assert_eq!(l.class, LaneLineClass::DashedLine);
+    assert!(max < 0.05);
+}
+
+#[test]
+fn dash_touching_a_solid_line_is_its_own_dash() {
+    // A solid–dashed double line: solid at 0, dashes centred 0.16 m beside it (touching).
+    let path = Path { radius: None };
+    let paint = vec![
+        Paint {
+            offset: 0.0,
+            width: 0.15,
+            intervals: vec![(0.0, 60.0)],
+        },
+        dashes(0.16, 0.15, 6.0, 9.0, 3.0, 60.0, &[]),
+    ];
+    let (cloud, traj) = scan(path, 60.0, &paint, 4);
+    let traj = {
+        // Drive 2 m to the right of the lines.
+        let p: Vec<Pose> = traj.poses().iter().map(|q| Pose { y: q.y - 2.0, ..*q }).collect();
+        Trajectory::new(p).unwrap()
+    };
+    let out = pipeline(&cloud, &traj);
+    eprintln!(
+        "double line: {} dashed, {} solid, {} lanes",
+        count(&out.markings, MarkingClass::DashedLine),
+        count(&out.markings, MarkingClass::SolidLine),
+        out.lanes.len()
+    );
+    for c in &out.candidates {
+        eprintln!(
+            "  {:?} L={:.2} W={:.2} line={:?} s={:.1} o={:.2}",
+            c.class,
+            c.shape.length_m,
+            c.shape.width_m,
+            c.line.as_ref().map(|l| (l.length_m, l.width_m)),
+            c.shape.mileage_m,
+            c.shape.offset_m
+        );
+    }
+    assert_eq!(
+        count(&out.markings, MarkingClass::DashedLine),
+        paint[1].intervals.len()
+    );
+    assert_eq!(count(&out.markings, MarkingClass::SolidLine), 1);
+    let solid = out
+        .markings
+        .iter()
+        .find(|m| m.class == MarkingClass::SolidLine)
+        .unwrap();
+    assert!(
+        solid.width_m < 0.22,
+        "the solid line is not widened by the dashes: {}",
+        solid.width_m
+    );
+}
+
+#[test]
+fn stop_line_crosswalk_and_distractors() {
+    let mut rng = Lcg(9);
+    let mut cloud = PointCloud::with_origin([0.0, 0.0, 0.0]);
+    let mut fill = |cloud: &mut PointCloud, cx: f64, cy: f64, len: f64, wid: f64, deg: f64| {
+        let (s, c) = deg.to_radians().sin_cos();
+        let (nu, nv) = ((len / 0.03) as i64, (wid / 0.03).max(1.0) as i64);
+        for i in 0..=nu {
+            for j in 0..=nv {
+                let (u, v) = (
+                    -len / 2.0 + len * i as f64 / nu as f64,
+                    -wid / 2.0 + wid * j as f64 / nv as f64,
+                );
+                let (u, v) = (u + 0.004 * rng.gauss(), v + 0.004 * rng.gauss());
+                cloud.push_local(cx + u * c - v * s, cy + u * s + v * c, 0.0, 40000.0, None, 0);
+            }
+        }
+    };
+    // Driving along +x. Stop line across the lane at x = 20; crosswalk stripes along the
+    // road (0.45 × 4 m, 1.05 m apart) at x = 25; a manhole cover; a diagonal sealant streak.
+    fill(&mut cloud, 20.0, 0.0, 3.5, 0.4, 90.0);
+    for k in 0..5 {
+        fill(&mut cloud, 25.0, -2.0 + k as f64 * 1.05, 4.0, 0.45, 0.0);
+    }
+    for i in 0..600 {
+        let a = i as f64 * 0.7;
+        let r = 0.35 * (i as f64 / 600.0).sqrt();
+        cloud.push_local(40.0 + r * a.cos(), 1.0 + r * a.sin(), 0.0, 40000.0, None, 0);
+    }
+    fill(&mut cloud, 50.0, 0.0, 3.0, 0.04, 70.0);
+    let traj = Trajectory::new(vec![pose(0.0, -10.0, -1.0), pose(10.0, 90.0, -1.0)]).unwrap();
+    let clusters = cluster::run(&cloud, &cluster::Params::default());
+    let all = classify::assess(&cloud, &clusters, &traj, &classify::Params::default());
+    for (c, d) in &all {
+        eprintln!(
+            "  {:?} {:?} L={:.2} W={:.2} fill={:.2} ang={:.0}",
+            c.class,
+            d,
+            c.shape.length_m,
+            c.shape.width_m,
+            c.shape.fill_ratio,
+            c.shape.angle_to_trajectory_deg
+        );
+    }
+    let kept: Vec<&classify::Candidate> = all.iter().filter(|(_, d)| d.is_none()).map(|(c, _)| c).collect();
+    assert_eq!(
+        kept.iter().filter(|c| c.class == MarkingClass::StopLine).count(),
+        1
+    );
+    assert_eq!(
+        kept.iter().filter(|c| c.class == MarkingClass::Crosswalk).count(),
+        5
+    );
+    assert_eq!(kept.len(), 6, "manhole cover and sealant streak are dropped");
+    assert!(all.iter().any(|(_, d)| *d == Some(classify::DropReason::Blob)));
+    assert!(
+        all.iter()
+            .any(|(_, d)| *d == Some(classify::DropReason::SteepNoise))
+    );
+}
+
+#[test]
+fn outlines_contain_their_points() {
+    // Every kept candidate's outline holds ≥ 95 % of its points (rectangles, buffered
+    // centrelines and alpha shapes alike), on a mixed scene with an arrow-like shape.
+    let path = Path { radius: Some(150.0) };
+    let paint = vec![
+        dashes(1.75, 0.15, 6.0, 9.0, 0.0, 80.0, &[]),
+        Paint {
+            offset: -1.75,
+            width: 0.2,
+            intervals: vec![(0.0, 80.0)],
+        },
+    ];
+    let (mut cloud, traj) = scan(path, 80.0, &paint, 5);
+    // An arrow-like irregular blob (triangle) off the lines.
+    for i in 0..60 {
+        for j in 0..=(60 - i) {
+            cloud.push_local(
+                30.0 + i as f64 * 0.02,
+                5.0 + (j as f64 - (60 - i) as f64 / 2.0) * 0.02,
+                0.0,
+                4e4,
+                None,
+                0,
+            );
+        }
+    }
+    let out = pipeline(&cloud, &traj);
+    let o = cloud.origin;
+    assert!(!out.candidates.is_empty());
+    let pieces = vectorize::outlines(
+        &cloud,
+        &out.candidates,
+        &traj.to_local(o),
+        &vectorize::Params::default(),
+    );
+    for (c, p) in out.candidates.iter().zip(&pieces) {
+        let inside = c
+            .indices
+            .iter()
+            .filter(|&&i| outline::contains(&p.marking.outline, [cloud.x[i] + o[0], cloud.y[i] + o[1]], 0.01))
+            .count();
+        let frac = inside as f64 / c.indices.len() as f64;
+        assert!(frac >= 0.95, "{:?}: only {frac:.3} of the points inside", c.class);
+    }
+}
+
+/// Read a LAS file into a cloud with a local origin (test helper; the io module's reader
+/// replaces this once it lands).
+fn read_las(path: &std::path::Path) -> PointCloud {
+    let mut reader = las::Reader::from_path(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let pd = reader.read_all().expect("points");
+    let (xs, ys, zs): (Vec<f64>, Vec<f64>, Vec<f64>) = (pd.x().collect(), pd.y().collect(), pd.z().collect());
+    let it: Vec<u16> = pd.intensity().collect();
+    let mut cloud: Option<PointCloud> = None;
+    for i in 0..xs.len() {
+        let c = cloud.get_or_insert_with(|| PointCloud::with_origin([xs[0].floor(), ys[0].floor(), 0.0]));
+        let o = c.origin;
+        c.push_local(xs[i] - o[0], ys[i] - o[1], zs[i] - o[2], it[i] as f32, None, 0);
+    }
+    cloud.unwrap_or_default()
+}
+
+fn read_traj(path: &std::path::Path) -> Trajectory {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let poses: Vec<Pose> = text
+        .lines()
+        .skip(1)
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| {
+            let v: Vec<f64> = l.split(',').map(|x| x.trim().parse().unwrap()).collect();
+            pose(v[0], v[1], v[2])
+        })
+        .collect();
+    Trajectory::new(poses).unwrap()
+}
+
+#[test]
+fn rovereto_real_drive_gives_continuous_lane_lines() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/real/nwu_rovereto");
+    if !dir.exists() {
+        eprintln!("skipping: {} not found", dir.display());
+        return;
+    }
+    let cloud = read_las(&dir.join("points.las"));
+    let traj = read_traj(&dir.join("trajectory.csv"));
+    assert_eq!(cloud.len(), 18_496);
+    let t0 = std::time::Instant::now();
+    let out = pipeline(&cloud, &traj);
+    let dt = t0.elapsed();
+    let local = traj.to_local(cloud.origin);
+    let refl = roadmark::pipeline::refline::RefLine::new(&local);
+    eprintln!(
+        "rovereto: {} points, {} markings ({} dashed, {} solid, {} unknown), {} lane lines in {:.0} ms",
+        cloud.len(),
+        out.markings.len(),
+        count(&out.markings, MarkingClass::DashedLine),
+        count(&out.markings, MarkingClass::SolidLine),
+        count(&out.markings, MarkingClass::Unknown),
+        out.lanes.len(),
+        dt.as_secs_f64() * 1e3
+    );
+    // Lane lines by offset: (mileage range, mean offset).
+    let mut summary = Vec::new();
+    for l in &out.lanes {
+        let st: Vec<[f64; 2]> = l
+            .line
+            .iter()
+            .map(|p| refl.locate([p[0] - cloud.origin[0], p[1] - cloud.origin[1]]))
+            .collect();
+        let mean_o = st.iter().map(|q| q[1]).sum::<f64>() / st.len() as f64;
+        let (s0, s1) = (st[0][0], st[st.len() - 1][0]);
+        eprintln!(
+            "  {} {:?} offset {mean_o:.2} m, mileage {s0:.1}..{s1:.1} ({:.1} m), {} markings, conf {:.2}",
+            l.id,
+            l.class,
+            l.length_m,
+            l.marking_ids.len(),
+            l.confidence
+        );
+        summary.push((l.class, mean_o, s0, s1));
+    }
+    let find = |o: f64| {
+        summary
+            .iter()
+            .filter(|q| (q.1 - o).abs() < 0.5)
+            .collect::<Vec<_>>()
+    };
+    // The dashed lane line at +2.0 m: one lane line over the whole drive (dashes from ~0 to ~88 m).
+    let d = find(2.0);
+    assert_eq!(d.len(), 1, "dashed line at +2.0 m: {d:?}");
+    assert_eq!(d[0].0, LaneLineClass::DashedLine);
+    assert!(d[0].3 - d[0].2 > 75.0, "{d:?}");
+    // The line at −1.7 m: solid for ~45 m, then dashed (short 4 m dashes).
+    let m = find(-1.7);
+    assert!(m.iter().any(|q| q.0 == LaneLineClass::DashedLine), "{m:?}");
+    assert!(m.iter().map(|q| q.3 - q.2).sum::<f64>() > 75.0, "{m:?}");
+    // Solid edges at −9.1 m and +5.5 m, continuous.
+    for o in [-9.1, 5.5] {
+        let e = find(o);
+        assert_eq!(e.len(), 1, "edge at {o}: {e:?}");
+        assert_eq!(e[0].0, LaneLineClass::SolidLine);
+        assert!(e[0].3 - e[0].2 > 75.0, "{e:?}");
+    }
+}
