@@ -1,9 +1,10 @@
 //! Stage 6: vectorisation — marking outlines, lane lines, ids.
 //!
 //! # Interface
-//! - `outlines(&PointCloud, &[Candidate], &Trajectory(local), &Params) -> Vec<Piece>`: one
-//!   [`Piece`] per candidate: a [`Marking`] in ABSOLUTE coordinates (origin added; `id`
-//!   still empty) and, for pieces along the road, the absolute centreline. Per chunk.
+//! - `outlines(&PointCloud, &[Candidate], &Params) -> Vec<Piece>`: one [`Piece`] per
+//!   candidate: a [`Marking`] in ABSOLUTE coordinates (origin added; `id` still empty) and,
+//!   for pieces along the road, the absolute centreline. Per chunk (the candidates already
+//!   carry their trajectory frame).
 //! - `assemble(Vec<Piece>, &Trajectory(absolute), &Params) -> (Vec<Marking>, Vec<LaneLine>)`:
 //!   lane-line growth over all pieces (run it once per drive, so lane lines are continuous
 //!   across tiles and chunks), class corrections from the lane context, then stable ids
@@ -93,8 +94,7 @@ pub fn heading_deg(d: [f64; 2]) -> f64 {
 }
 
 /// Outline every candidate (see the module docs).
-pub fn outlines(cloud: &PointCloud, candidates: &[Candidate], traj_local: &Trajectory, params: &Params) -> Vec<Piece> {
-    let _ = traj_local; // the candidates already carry their trajectory frame
+pub fn outlines(cloud: &PointCloud, candidates: &[Candidate], params: &Params) -> Vec<Piece> {
     let o = cloud.origin;
     let abs = |p: [f64; 2]| [p[0] + o[0], p[1] + o[1]];
     candidates
@@ -249,7 +249,7 @@ pub fn run(
     traj_local: &Trajectory,
     params: &Params,
 ) -> (Vec<Marking>, Vec<LaneLine>) {
-    let pieces = outlines(cloud, candidates, traj_local, params);
+    let pieces = outlines(cloud, candidates, params);
     let o = cloud.origin;
     let traj_abs = traj_local.to_local([-o[0], -o[1], -o[2]]);
     assemble(pieces, &traj_abs, params)
