@@ -504,7 +504,6 @@ fn rovereto_real_drive_gives_continuous_lane_lines() {
 /// classify → vectorize on them: measures these stages in isolation from pavement and
 /// thresholding errors. Returns the evaluation report against the truth.
 fn isolated(scene: &str, length_m: Option<f64>, seed: u64) -> roadmark::eval::Report {
-    use roadmark::pipeline::{geojson, io, types::Extraction};
     let dir = tempfile::tempdir().expect("tempdir");
     let opt = roadmark::sim::SimOptions {
         scene: scene.into(),
@@ -514,11 +513,26 @@ fn isolated(scene: &str, length_m: Option<f64>, seed: u64) -> roadmark::eval::Re
     };
     let t0 = std::time::Instant::now();
     let sum = roadmark::sim::simulate(&opt, dir.path()).expect("simulate");
-    let t_sim = t0.elapsed().as_secs_f64();
-    let las = dir.path().join("points.las");
+    eprintln!("{scene}: {} points simulated in {:.1} s", sum.points, t0.elapsed().as_secs_f64());
+    run_isolated_dir(dir.path()).report
+}
+
+struct Isolated {
+    report: roadmark::eval::Report,
+    truth: roadmark::pipeline::types::Extraction,
+    result: roadmark::pipeline::types::Extraction,
+    marks: PointCloud,
+    traj: Trajectory,
+}
+
+/// Run cluster → classify → vectorize on the true paint points of a simulated survey
+/// directory, evaluate against the observed part of the truth and print the numbers.
+fn run_isolated_dir(dir: &std::path::Path) -> Isolated {
+    use roadmark::pipeline::{geojson, io, types::Extraction};
+    let las = dir.join("points.las");
     let cloud = io::read_points(&[las.as_path()]).expect("points");
-    let traj = io::read_trajectory(&dir.path().join("trajectory.csv")).expect("trajectory");
-    let labels: Vec<u32> = std::fs::read(dir.path().join("labels.bin"))
+    let traj = io::read_trajectory(&dir.join("trajectory.csv")).expect("trajectory");
+    let labels: Vec<u32> = std::fs::read(dir.join("labels.bin"))
         .expect("labels")
         .chunks_exact(4)
         .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
@@ -539,7 +553,7 @@ fn isolated(scene: &str, length_m: Option<f64>, seed: u64) -> roadmark::eval::Re
         lane_lines,
         crs: cloud.crs.clone(),
     };
-    let truth = geojson::read_geojson(&dir.path().join("truth.geojson")).expect("truth");
+    let truth = geojson::read_geojson(&dir.join("truth.geojson")).expect("truth");
     let truth = clip_truth(truth, &cloud, &labels, &traj);
     let report = roadmark::eval::evaluate(&truth, &result, &roadmark::eval::EvalOptions::default()).expect("eval");
     let l = &report.lanes;
@@ -547,12 +561,13 @@ fn isolated(scene: &str, length_m: Option<f64>, seed: u64) -> roadmark::eval::Re
     let s = &report.solid_line;
     let f = |v: Option<f64>| v.map_or("n/a".to_string(), |v| format!("{v:.3}"));
     eprintln!(
-        "{scene}: {} points ({} paint) simulated in {t_sim:.1} s; stages {:.0} ms (cluster {:.0}, classify {:.0}) = {:.2} M paint pts/s\n  lanes: truth {} result {} completeness {} correctness {} rmse {} frag mean {} max {:?} class agreement {}\n  solid: recall {} precision {}\n  objects: detection P {} R {} F {}, class acc {}, macro-F1 {}, mean IoU {}\n  pixel F {}",
-        sum.points,
+        "{}: {} paint points; stages {:.0} ms (cluster {:.0}, classify {:.0}, vectorize {:.0}) = {:.2} M paint pts/s\n  lanes: truth {} result {} completeness {} correctness {} rmse {} frag mean {} max {:?} class agreement {}\n  solid: recall {} precision {}\n  objects: detection P {} R {} F {}, class acc {}, macro-F1 {}, mean IoU {}\n  pixel F {}",
+        dir.display(),
         paint.len(),
         t_all * 1e3,
         t_cl * 1e3,
         t_cf * 1e3,
+        (t_all - t_cl - t_cf) * 1e3,
         paint.len() as f64 / t_all / 1e6,
         l.truth_lines,
         l.result_lines,
@@ -573,9 +588,15 @@ fn isolated(scene: &str, length_m: Option<f64>, seed: u64) -> roadmark::eval::Re
         f(report.pixel.f_score),
     );
     for c in &o.per_class {
-        eprintln!("    {c:?}");
+        eprintln!("    {} truth {} result {} tp {} P {} R {} F1 {}", c.class, c.truth, c.result, c.tp, f(c.precision), f(c.recall), f(c.f1));
     }
-    report
+    Isolated {
+        report,
+        truth,
+        result,
+        marks,
+        traj,
+    }
 }
 
 /// All five scenes at their default length (slow: run explicitly).
@@ -588,63 +609,112 @@ fn simulated_scenes_isolated() {
     }
 }
 
-/// Debug view of one simulated scene directory (env `VEC_SIM_DIR`): per truth marking, the
-/// clusters its paint points fell into and what became of them; `debug.png` top view.
+/// Debug view of one simulated scene directory (env `VEC_SIM_DIR`): the isolated numbers,
+/// per truth lane line the result lines near it, and `VEC_SIM_DIR/debug_*.png`, a top view
+/// in the (mileage, offset) frame (10 cm × 5 cm pixels): paint grey, result outlines by
+/// class, result lane lines red, truth lane lines green.
 /// `VEC_SIM_DIR=/tmp/vec_sim/highway cargo test --release --test vector debug_scene -- --ignored --nocapture`
 #[test]
 #[ignore]
 fn debug_scene() {
-    use roadmark::pipeline::{geojson, io};
     let Ok(dir) = std::env::var("VEC_SIM_DIR") else { return };
     let dir = std::path::PathBuf::from(dir);
-    let las = dir.join("points.las");
-    let cloud = io::read_points(&[las.as_path()]).expect("points");
-    let traj = io::read_trajectory(&dir.join("trajectory.csv")).expect("trajectory");
-    let labels: Vec<u32> = std::fs::read(dir.join("labels.bin"))
-        .expect("labels")
-        .chunks_exact(4)
-        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-        .collect();
-    let paint: Vec<usize> = (0..labels.len()).filter(|&i| labels[i] > 0).collect();
-    let lab: Vec<u32> = paint.iter().map(|&i| labels[i]).collect();
-    let marks = cloud.select(&paint);
-    let local = traj.to_local(marks.origin);
-    let truth = geojson::read_geojson(&dir.join("truth.geojson")).expect("truth");
-    let clusters = cluster::run(&marks, &cluster::Params::default());
-    let all = classify::assess(&marks, &clusters, &local, &classify::Params::default());
-    let mut owner = vec![usize::MAX; marks.len()];
-    for (k, (c, _)) in all.iter().enumerate() {
-        for &i in &c.indices {
-            owner[i] = k;
-        }
+    let iso = run_isolated_dir(&dir);
+    {
+        let xy: Vec<[f64; 2]> = (0..iso.marks.len()).map(|i| [iso.marks.x[i], iso.marks.y[i]]).collect();
+        let t = std::time::Instant::now();
+        let c0 = roadmark::pipeline::geom::components(&xy, 0.25);
+        let t0 = t.elapsed().as_secs_f64();
+        let c1 = roadmark::pipeline::geom::components_adaptive(&xy, 0.25, 0.6, 2);
+        let t1 = t.elapsed().as_secs_f64() - t0;
+        let nosplit = cluster::Params { split: false, ..Default::default() };
+        let t = std::time::Instant::now();
+        let c2 = cluster::run(&iso.marks, &nosplit);
+        let t2 = t.elapsed().as_secs_f64();
+        eprintln!("components {} in {:.0} ms; adaptive {} in {:.0} ms; run without split {} in {:.0} ms", c0.len(), t0 * 1e3, c1.len(), t1 * 1e3, c2.len(), t2 * 1e3);
     }
-    let refl = roadmark::pipeline::refline::RefLine::new(&local);
-    for (t, m) in truth.markings.iter().enumerate() {
-        let pts: Vec<usize> = (0..lab.len()).filter(|&i| lab[i] as usize == t + 1).collect();
-        let mut own: std::collections::BTreeMap<usize, usize> = Default::default();
-        for &i in &pts {
-            *own.entry(owner[i]).or_default() += 1;
-        }
-        let so = if pts.is_empty() { [0.0, 0.0] } else { refl.locate([marks.x[pts[0]], marks.y[pts[0]]]) };
-        let desc: Vec<String> = own
+    let refl = roadmark::pipeline::refline::RefLine::new(&iso.traj);
+    let so = |p: [f64; 2]| refl.locate(p);
+    for t in &iso.truth.lane_lines {
+        let st: Vec<[f64; 2]> = t.line.iter().map(|&p| so(p)).collect();
+        let o = st.iter().map(|q| q[1]).sum::<f64>() / st.len() as f64;
+        let near: Vec<String> = iso
+            .result
+            .lane_lines
             .iter()
-            .map(|(&k, &n)| {
-                if k == usize::MAX {
-                    return format!("{n} unclustered");
-                }
-                let (c, d) = &all[k];
-                format!(
-                    "{n}→{:?}{} L={:.1} W={:.2} line={:?} n={}",
-                    c.class,
-                    d.map_or(String::new(), |d| format!("/{d:?}")),
-                    c.shape.length_m,
-                    c.shape.width_m,
-                    c.line.as_ref().map(|l| (l.length_m * 10.0).round() / 10.0),
-                    c.indices.len()
-                )
+            .filter_map(|r| {
+                let rs: Vec<[f64; 2]> = r.line.iter().map(|&p| so(p)).collect();
+                let ro = rs.iter().map(|q| q[1]).sum::<f64>() / rs.len() as f64;
+                ((ro - o).abs() < 1.0).then(|| format!("{} {:?} {:.0}..{:.0} o={ro:.2}", r.id, r.class, rs[0][0], rs[rs.len() - 1][0]))
             })
             .collect();
-        eprintln!("{} {:?} L={:.1} W={:.2} pts={} s={:.0} o={:.1}: {}", m.id, m.class, m.length_m, m.width_m, pts.len(), so[0], so[1], desc.join(" | "));
+        eprintln!("truth {} {:?} o={o:.2} s={:.0}..{:.0}: {}", t.id, t.class, st[0][0], st[st.len() - 1][0], near.join(" | "));
+    }
+    // Picture.
+    let o = iso.marks.origin;
+    let (px_s, px_o) = (0.1, 0.05);
+    let pts: Vec<[f64; 2]> = (0..iso.marks.len()).map(|i| so([iso.marks.x[i] + o[0], iso.marks.y[i] + o[1]])).collect();
+    let s_lo = pts.iter().map(|q| q[0]).fold(f64::INFINITY, f64::min);
+    let s_hi = pts.iter().map(|q| q[0]).fold(f64::NEG_INFINITY, f64::max);
+    let (o_lo, o_hi) = (-30.0, 30.0);
+    let w = ((s_hi - s_lo) / px_s) as usize + 1;
+    let h = ((o_hi - o_lo) / px_o) as usize + 1;
+    let mut img = vec![0u8; w * h * 3];
+    let mut put = |img: &mut Vec<u8>, q: [f64; 2], c: [u8; 3]| {
+        let (x, y) = (((q[0] - s_lo) / px_s) as i64, ((o_hi - q[1]) / px_o) as i64);
+        if x >= 0 && y >= 0 && (x as usize) < w && (y as usize) < h {
+            let i = (y as usize * w + x as usize) * 3;
+            img[i..i + 3].copy_from_slice(&c);
+        }
+    };
+    for q in &pts {
+        put(&mut img, *q, [110, 110, 110]);
+    }
+    let mut draw_line = |img: &mut Vec<u8>, line: &[[f64; 2]], closed: bool, c: [u8; 3]| {
+        let n = line.len();
+        let segs = if closed { n } else { n.saturating_sub(1) };
+        for i in 0..segs {
+            let (a, b) = (line[i], line[(i + 1) % n]);
+            let len = (b[0] - a[0]).hypot(b[1] - a[1]);
+            let k = (len / 0.03).ceil().max(1.0) as usize;
+            for j in 0..=k {
+                let f = j as f64 / k as f64;
+                put(img, so([a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1])]), c);
+            }
+        }
+    };
+    for m in &iso.result.markings {
+        let c = match m.class {
+            MarkingClass::SolidLine => [60, 120, 255],
+            MarkingClass::DashedLine => [0, 230, 230],
+            MarkingClass::Crosswalk => [255, 255, 0],
+            MarkingClass::StopLine => [255, 140, 0],
+            MarkingClass::Guideline => [150, 255, 150],
+            _ => [255, 0, 255],
+        };
+        draw_line(&mut img, &m.outline, true, c);
+    }
+    for t in &iso.truth.lane_lines {
+        draw_line(&mut img, &t.line, false, [0, 200, 0]);
+    }
+    for l in &iso.result.lane_lines {
+        draw_line(&mut img, &l.line, false, [255, 40, 40]);
+    }
+    // Tiles of at most 1500 px along the road.
+    let tile = 1500;
+    for (k, x0) in (0..w).step_by(tile).enumerate() {
+        let tw = tile.min(w - x0);
+        let mut data = Vec::with_capacity(tw * h * 3);
+        for y in 0..h {
+            data.extend_from_slice(&img[(y * w + x0) * 3..(y * w + x0 + tw) * 3]);
+        }
+        let path = dir.join(format!("debug_{k}.png"));
+        let f = std::fs::File::create(&path).expect("png file");
+        let mut enc = png::Encoder::new(std::io::BufWriter::new(f), tw as u32, h as u32);
+        enc.set_color(png::ColorType::Rgb);
+        enc.set_depth(png::BitDepth::Eight);
+        enc.write_header().expect("png header").write_image_data(&data).expect("png data");
+        eprintln!("wrote {} (s from {:.0})", path.display(), s_lo + x0 as f64 * px_s);
     }
 }
 
