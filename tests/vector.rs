@@ -3,9 +3,7 @@
 //! Numbers are printed (run with `--nocapture`) so accuracy can be read off:
 //! `cargo test --test vector -- --nocapture`.
 
-use roadmark::pipeline::types::{
-    LaneLine, LaneLineClass, Marking, MarkingClass, PointCloud, Pose, Trajectory,
-};
+use roadmark::pipeline::types::{LaneLine, LaneLineClass, Marking, MarkingClass, PointCloud, Pose, Trajectory};
 use roadmark::pipeline::{classify, cluster, outline, vectorize};
 
 fn pose(t: f64, x: f64, y: f64) -> Pose {
@@ -24,10 +22,7 @@ fn pose(t: f64, x: f64, y: f64) -> Pose {
 struct Lcg(u64);
 impl Lcg {
     fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
+        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
         (self.0 >> 11) as f64 / (1u64 << 53) as f64
     }
     fn gauss(&mut self) -> f64 {
@@ -102,13 +97,7 @@ fn scan(path: Path, length: f64, paint: &[Paint], seed: u64) -> (PointCloud, Tra
 }
 
 /// Like [`scan`], with no points at all in the `occluded` path intervals (a parked truck).
-fn scan_occluded(
-    path: Path,
-    length: f64,
-    paint: &[Paint],
-    occluded: &[(f64, f64)],
-    seed: u64,
-) -> (PointCloud, Trajectory) {
+fn scan_occluded(path: Path, length: f64, paint: &[Paint], occluded: &[(f64, f64)], seed: u64) -> (PointCloud, Trajectory) {
     let origin = [500_000.0, 4_000_000.0, 0.0];
     let mut rng = Lcg(seed);
     let mut cloud = PointCloud::with_origin(origin);
@@ -130,14 +119,7 @@ fn scan_occluded(
                 }
                 let o = pt.offset - pt.width / 2.0 + pt.width * j as f64 / n as f64;
                 let p = path.at(s, o);
-                cloud.push_local(
-                    p[0] + 0.005 * rng.gauss(),
-                    p[1] + 0.005 * rng.gauss(),
-                    0.0,
-                    40000.0,
-                    None,
-                    0,
-                );
+                cloud.push_local(p[0] + 0.005 * rng.gauss(), p[1] + 0.005 * rng.gauss(), 0.0, 40000.0, None, 0);
             }
         }
         s += 0.05;
@@ -176,10 +158,7 @@ fn pipeline(cloud: &PointCloud, traj: &Trajectory) -> Out {
 fn line_errors(l: &LaneLine, path: Path, o: f64, origin: [f64; 3]) -> (f64, f64) {
     let mut errs = Vec::new();
     for w in l.line.windows(2) {
-        let (a, b) = (
-            [w[0][0] - origin[0], w[0][1] - origin[1]],
-            [w[1][0] - origin[0], w[1][1] - origin[1]],
-        );
+        let (a, b) = ([w[0][0] - origin[0], w[0][1] - origin[1]], [w[1][0] - origin[0], w[1][1] - origin[1]]);
         let len = (b[0] - a[0]).hypot(b[1] - a[1]);
         let k = (len / 0.1).ceil().max(1.0) as usize;
         for i in 0..k {
@@ -250,27 +229,14 @@ fn straight_road_dashes_solid_and_parallel_lines_never_joined() {
         // Lane lines are ordered by mileage then offset; find the right truth by offset.
         let _ = (o, class);
         let y = l.line[0][1] - cloud.origin[1];
-        let (o, class) = [
-            (-1.75, LaneLineClass::SolidLine),
-            (1.75, LaneLineClass::DashedLine),
-            (5.25, LaneLineClass::DashedLine),
-        ]
-        .into_iter()
-        .min_by(|a, b| (a.0 - y).abs().total_cmp(&(b.0 - y).abs()))
-        .unwrap();
+        let (o, class) = [(-1.75, LaneLineClass::SolidLine), (1.75, LaneLineClass::DashedLine), (5.25, LaneLineClass::DashedLine)]
+            .into_iter()
+            .min_by(|a, b| (a.0 - y).abs().total_cmp(&(b.0 - y).abs()))
+            .unwrap();
         let (max, rms) = line_errors(l, path, o, cloud.origin);
-        eprintln!(
-            "  lane {} {:?} at {o}: {} pieces, max {max:.4} m, rms {rms:.4} m, length {:.1}",
-            l.id,
-            l.class,
-            l.marking_ids.len(),
-            l.length_m
-        );
+        eprintln!("  lane {} {:?} at {o}: {} pieces, max {max:.4} m, rms {rms:.4} m, length {:.1}", l.id, l.class, l.marking_ids.len(), l.length_m);
         assert_eq!(l.class, class);
-        assert!(
-            max < 0.05 && rms < 0.02,
-            "lane line off the paint: max {max}, rms {rms}"
-        );
+        assert!(max < 0.05 && rms < 0.02, "lane line off the paint: max {max}, rms {rms}");
     }
     // Ids are m1.. / l1.. and every marking id referenced by a lane line exists.
     for l in &out.lanes {
@@ -279,20 +245,9 @@ fn straight_road_dashes_solid_and_parallel_lines_never_joined() {
         }
     }
     // Dash sizes.
-    for m in out
-        .markings
-        .iter()
-        .filter(|m| m.class == MarkingClass::DashedLine)
-    {
-        assert!(
-            (m.length_m - 6.0).abs() < 0.2 && (m.width_m - 0.15).abs() < 0.05,
-            "{m:?}"
-        );
-        assert!(
-            (m.heading_deg - 90.0).abs() < 1.0,
-            "heading along +x is east: {}",
-            m.heading_deg
-        );
+    for m in out.markings.iter().filter(|m| m.class == MarkingClass::DashedLine) {
+        assert!((m.length_m - 6.0).abs() < 0.2 && (m.width_m - 0.15).abs() < 0.05, "{m:?}");
+        assert!((m.heading_deg - 90.0).abs() < 1.0, "heading along +x is east: {}", m.heading_deg);
     }
 }
 
@@ -310,37 +265,17 @@ fn curved_dashed_line_follows_the_arc() {
     ];
     let (cloud, traj) = scan(path, 150.0, &paint, 2);
     let out = pipeline(&cloud, &traj);
-    assert_eq!(
-        out.lanes.len(),
-        2,
-        "{:?}",
-        out.lanes.iter().map(|l| l.length_m).collect::<Vec<_>>()
-    );
+    assert_eq!(out.lanes.len(), 2, "{:?}", out.lanes.iter().map(|l| l.length_m).collect::<Vec<_>>());
     for l in &out.lanes {
-        let o = if l.class == LaneLineClass::DashedLine {
-            1.75
-        } else {
-            -1.75
-        };
+        let o = if l.class == LaneLineClass::DashedLine { 1.75 } else { -1.75 };
         let (max, rms) = line_errors(l, path, o, cloud.origin);
-        eprintln!(
-            "curve R=100: lane {:?} max {max:.4} m rms {rms:.4} m length {:.1} m",
-            l.class, l.length_m
-        );
+        eprintln!("curve R=100: lane {:?} max {max:.4} m rms {rms:.4} m length {:.1} m", l.class, l.length_m);
         assert!(max <= 0.05, "lane line must stay within 0.05 m of the arc: {max}");
     }
     // The solid line on the curve is one piece with a curved outline (not a fat rectangle).
-    let solid: Vec<&Marking> = out
-        .markings
-        .iter()
-        .filter(|m| m.class == MarkingClass::SolidLine)
-        .collect();
+    let solid: Vec<&Marking> = out.markings.iter().filter(|m| m.class == MarkingClass::SolidLine).collect();
     assert_eq!(solid.len(), 1);
-    assert!(
-        (solid[0].width_m - 0.15).abs() < 0.05,
-        "width {}",
-        solid[0].width_m
-    );
+    assert!((solid[0].width_m - 0.15).abs() < 0.05, "width {}", solid[0].width_m);
     assert!(outline::area(&solid[0].outline) < 150.0 * 0.25);
 }
 
@@ -354,11 +289,7 @@ fn twenty_metres_of_occlusion_stay_one_lane_line() {
     assert_eq!(out.lanes.len(), 1);
     let l = &out.lanes[0];
     let (max, rms) = line_errors(l, path, 1.75, cloud.origin);
-    eprintln!(
-        "occlusion: {} pieces, length {:.1}, max {max:.4} rms {rms:.4}",
-        l.marking_ids.len(),
-        l.length_m
-    );
+    eprintln!("occlusion: {} pieces, length {:.1}, max {max:.4} rms {rms:.4}", l.marking_ids.len(), l.length_m);
     // Dashes 75–81 and 90–96 are cut by the occlusion: 75–78 remains, 90–96 is gone.
     assert_eq!(l.marking_ids.len(), paint[0].intervals.len() - 1);
     assert_eq!(l.class, LaneLineClass::DashedLine);
@@ -391,31 +322,12 @@ fn dash_touching_a_solid_line_is_its_own_dash() {
         out.lanes.len()
     );
     for c in &out.candidates {
-        eprintln!(
-            "  {:?} L={:.2} W={:.2} line={:?} s={:.1} o={:.2}",
-            c.class,
-            c.shape.length_m,
-            c.shape.width_m,
-            c.line.as_ref().map(|l| (l.length_m, l.width_m)),
-            c.shape.mileage_m,
-            c.shape.offset_m
-        );
+        eprintln!("  {:?} L={:.2} W={:.2} line={:?} s={:.1} o={:.2}", c.class, c.shape.length_m, c.shape.width_m, c.line.as_ref().map(|l| (l.length_m, l.width_m)), c.shape.mileage_m, c.shape.offset_m);
     }
-    assert_eq!(
-        count(&out.markings, MarkingClass::DashedLine),
-        paint[1].intervals.len()
-    );
+    assert_eq!(count(&out.markings, MarkingClass::DashedLine), paint[1].intervals.len());
     assert_eq!(count(&out.markings, MarkingClass::SolidLine), 1);
-    let solid = out
-        .markings
-        .iter()
-        .find(|m| m.class == MarkingClass::SolidLine)
-        .unwrap();
-    assert!(
-        solid.width_m < 0.22,
-        "the solid line is not widened by the dashes: {}",
-        solid.width_m
-    );
+    let solid = out.markings.iter().find(|m| m.class == MarkingClass::SolidLine).unwrap();
+    assert!(solid.width_m < 0.22, "the solid line is not widened by the dashes: {}", solid.width_m);
 }
 
 #[test]
@@ -427,10 +339,7 @@ fn stop_line_crosswalk_and_distractors() {
         let (nu, nv) = ((len / 0.03) as i64, (wid / 0.03).max(1.0) as i64);
         for i in 0..=nu {
             for j in 0..=nv {
-                let (u, v) = (
-                    -len / 2.0 + len * i as f64 / nu as f64,
-                    -wid / 2.0 + wid * j as f64 / nv as f64,
-                );
+                let (u, v) = (-len / 2.0 + len * i as f64 / nu as f64, -wid / 2.0 + wid * j as f64 / nv as f64);
                 let (u, v) = (u + 0.004 * rng.gauss(), v + 0.004 * rng.gauss());
                 cloud.push_local(cx + u * c - v * s, cy + u * s + v * c, 0.0, 40000.0, None, 0);
             }
@@ -452,31 +361,14 @@ fn stop_line_crosswalk_and_distractors() {
     let clusters = cluster::run(&cloud, &cluster::Params::default());
     let all = classify::assess(&cloud, &clusters, &traj, &classify::Params::default());
     for (c, d) in &all {
-        eprintln!(
-            "  {:?} {:?} L={:.2} W={:.2} fill={:.2} ang={:.0}",
-            c.class,
-            d,
-            c.shape.length_m,
-            c.shape.width_m,
-            c.shape.fill_ratio,
-            c.shape.angle_to_trajectory_deg
-        );
+        eprintln!("  {:?} {:?} L={:.2} W={:.2} fill={:.2} ang={:.0}", c.class, d, c.shape.length_m, c.shape.width_m, c.shape.fill_ratio, c.shape.angle_to_trajectory_deg);
     }
     let kept: Vec<&classify::Candidate> = all.iter().filter(|(_, d)| d.is_none()).map(|(c, _)| c).collect();
-    assert_eq!(
-        kept.iter().filter(|c| c.class == MarkingClass::StopLine).count(),
-        1
-    );
-    assert_eq!(
-        kept.iter().filter(|c| c.class == MarkingClass::Crosswalk).count(),
-        5
-    );
+    assert_eq!(kept.iter().filter(|c| c.class == MarkingClass::StopLine).count(), 1);
+    assert_eq!(kept.iter().filter(|c| c.class == MarkingClass::Crosswalk).count(), 5);
     assert_eq!(kept.len(), 6, "manhole cover and sealant streak are dropped");
     assert!(all.iter().any(|(_, d)| *d == Some(classify::DropReason::Blob)));
-    assert!(
-        all.iter()
-            .any(|(_, d)| *d == Some(classify::DropReason::SteepNoise))
-    );
+    assert!(all.iter().any(|(_, d)| *d == Some(classify::DropReason::SteepNoise)));
 }
 
 #[test]
@@ -496,25 +388,13 @@ fn outlines_contain_their_points() {
     // An arrow-like irregular blob (triangle) off the lines.
     for i in 0..60 {
         for j in 0..=(60 - i) {
-            cloud.push_local(
-                30.0 + i as f64 * 0.02,
-                5.0 + (j as f64 - (60 - i) as f64 / 2.0) * 0.02,
-                0.0,
-                4e4,
-                None,
-                0,
-            );
+            cloud.push_local(30.0 + i as f64 * 0.02, 5.0 + (j as f64 - (60 - i) as f64 / 2.0) * 0.02, 0.0, 4e4, None, 0);
         }
     }
     let out = pipeline(&cloud, &traj);
     let o = cloud.origin;
     assert!(!out.candidates.is_empty());
-    let pieces = vectorize::outlines(
-        &cloud,
-        &out.candidates,
-        &traj.to_local(o),
-        &vectorize::Params::default(),
-    );
+    let pieces = vectorize::outlines(&cloud, &out.candidates, &vectorize::Params::default());
     for (c, p) in out.candidates.iter().zip(&pieces) {
         let inside = c
             .indices
@@ -601,12 +481,7 @@ fn rovereto_real_drive_gives_continuous_lane_lines() {
         );
         summary.push((l.class, mean_o, s0, s1));
     }
-    let find = |o: f64| {
-        summary
-            .iter()
-            .filter(|q| (q.1 - o).abs() < 0.5)
-            .collect::<Vec<_>>()
-    };
+    let find = |o: f64| summary.iter().filter(|q| (q.1 - o).abs() < 0.5).collect::<Vec<_>>();
     // The dashed lane line at +2.0 m: one lane line over the whole drive (dashes from ~0 to ~88 m).
     let d = find(2.0);
     assert_eq!(d.len(), 1, "dashed line at +2.0 m: {d:?}");
@@ -623,4 +498,315 @@ fn rovereto_real_drive_gives_continuous_lane_lines() {
         assert_eq!(e[0].0, LaneLineClass::SolidLine);
         assert!(e[0].3 - e[0].2 > 75.0, "{e:?}");
     }
+}
+
+/// Simulate `scene`, keep only the TRUE paint points (labels > 0) and run cluster →
+/// classify → vectorize on them: measures these stages in isolation from pavement and
+/// thresholding errors. Returns the evaluation report against the truth.
+fn isolated(scene: &str, length_m: Option<f64>, seed: u64) -> roadmark::eval::Report {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let opt = roadmark::sim::SimOptions {
+        scene: scene.into(),
+        seed,
+        length_m,
+        ..Default::default()
+    };
+    let t0 = std::time::Instant::now();
+    let sum = roadmark::sim::simulate(&opt, dir.path()).expect("simulate");
+    eprintln!("{scene}: {} points simulated in {:.1} s", sum.points, t0.elapsed().as_secs_f64());
+    run_isolated_dir(dir.path()).report
+}
+
+struct Isolated {
+    report: roadmark::eval::Report,
+    truth: roadmark::pipeline::types::Extraction,
+    result: roadmark::pipeline::types::Extraction,
+    marks: PointCloud,
+    traj: Trajectory,
+}
+
+/// Run cluster → classify → vectorize on the true paint points of a simulated survey
+/// directory, evaluate against the observed part of the truth and print the numbers.
+fn run_isolated_dir(dir: &std::path::Path) -> Isolated {
+    use roadmark::pipeline::{geojson, io, types::Extraction};
+    let las = dir.join("points.las");
+    let cloud = io::read_points(&[las.as_path()]).expect("points");
+    let traj = io::read_trajectory(&dir.join("trajectory.csv")).expect("trajectory");
+    let labels: Vec<u32> = std::fs::read(dir.join("labels.bin"))
+        .expect("labels")
+        .chunks_exact(4)
+        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
+    assert_eq!(labels.len(), cloud.len(), "one label per point");
+    let paint: Vec<usize> = (0..labels.len()).filter(|&i| labels[i] > 0).collect();
+    let marks = cloud.select(&paint);
+    let local = traj.to_local(marks.origin);
+    let t1 = std::time::Instant::now();
+    let clusters = cluster::run(&marks, &cluster::Params::default());
+    let t_cl = t1.elapsed().as_secs_f64();
+    let candidates = classify::run(&marks, &clusters, &local, &classify::Params::default());
+    let t_cf = t1.elapsed().as_secs_f64() - t_cl;
+    let (markings, lane_lines) = vectorize::run(&marks, &candidates, &local, &vectorize::Params::default());
+    let t_all = t1.elapsed().as_secs_f64();
+    let result = Extraction {
+        markings,
+        lane_lines,
+        crs: cloud.crs.clone(),
+    };
+    let truth = geojson::read_geojson(&dir.join("truth.geojson")).expect("truth");
+    let truth = clip_truth(truth, &cloud, &labels, &traj);
+    let report = roadmark::eval::evaluate(&truth, &result, &roadmark::eval::EvalOptions::default()).expect("eval");
+    let l = &report.lanes;
+    let o = &report.objects;
+    let s = &report.solid_line;
+    let f = |v: Option<f64>| v.map_or("n/a".to_string(), |v| format!("{v:.3}"));
+    eprintln!(
+        "{}: {} paint points; stages {:.0} ms (cluster {:.0}, classify {:.0}, vectorize {:.0}) = {:.2} M paint pts/s\n  lanes: truth {} result {} completeness {} correctness {} rmse {} frag mean {} max {:?} class agreement {}\n  solid: recall {} precision {}\n  objects: detection P {} R {} F {}, class acc {}, macro-F1 {}, mean IoU {}\n  pixel F {}",
+        dir.display(),
+        paint.len(),
+        t_all * 1e3,
+        t_cl * 1e3,
+        t_cf * 1e3,
+        (t_all - t_cl - t_cf) * 1e3,
+        paint.len() as f64 / t_all / 1e6,
+        l.truth_lines,
+        l.result_lines,
+        f(l.completeness),
+        f(l.correctness),
+        f(l.rmse_m),
+        f(l.fragmentation_mean),
+        l.fragmentation_max,
+        f(l.class_agreement),
+        f(s.recall),
+        f(s.precision),
+        f(o.detection.precision),
+        f(o.detection.recall),
+        f(o.detection.f_score),
+        f(o.classification_accuracy),
+        f(o.macro_f1),
+        f(o.mean_iou),
+        f(report.pixel.f_score),
+    );
+    for c in &o.per_class {
+        eprintln!("    {} truth {} result {} tp {} P {} R {} F1 {}", c.class, c.truth, c.result, c.tp, f(c.precision), f(c.recall), f(c.f1));
+    }
+    Isolated {
+        report,
+        truth,
+        result,
+        marks,
+        traj,
+    }
+}
+
+/// All five scenes at their default length (slow: run explicitly).
+/// `cargo test --release --test vector simulated_scenes -- --ignored --nocapture`
+#[test]
+#[ignore]
+fn simulated_scenes_isolated() {
+    for scene in ["highway", "urban_intersection", "curved_ramp", "dual_head", "worn"] {
+        isolated(scene, None, 1);
+    }
+}
+
+/// Debug view of one simulated scene directory (env `VEC_SIM_DIR`): the isolated numbers,
+/// per truth lane line the result lines near it, and `VEC_SIM_DIR/debug_*.png`, a top view
+/// in the (mileage, offset) frame (10 cm × 5 cm pixels): paint grey, result outlines by
+/// class, result lane lines red, truth lane lines green.
+/// `VEC_SIM_DIR=/tmp/vec_sim/highway cargo test --release --test vector debug_scene -- --ignored --nocapture`
+#[test]
+#[ignore]
+fn debug_scene() {
+    let Ok(dir) = std::env::var("VEC_SIM_DIR") else { return };
+    let dir = std::path::PathBuf::from(dir);
+    let iso = run_isolated_dir(&dir);
+    {
+        let xy: Vec<[f64; 2]> = (0..iso.marks.len()).map(|i| [iso.marks.x[i], iso.marks.y[i]]).collect();
+        let t = std::time::Instant::now();
+        let c0 = roadmark::pipeline::geom::components(&xy, 0.25);
+        let t0 = t.elapsed().as_secs_f64();
+        let c1 = roadmark::pipeline::geom::components_adaptive(&xy, 0.25, 0.6, 2);
+        let t1 = t.elapsed().as_secs_f64() - t0;
+        let nosplit = cluster::Params { split: false, ..Default::default() };
+        let t = std::time::Instant::now();
+        let c2 = cluster::run(&iso.marks, &nosplit);
+        let t2 = t.elapsed().as_secs_f64();
+        eprintln!("components {} in {:.0} ms; adaptive {} in {:.0} ms; run without split {} in {:.0} ms", c0.len(), t0 * 1e3, c1.len(), t1 * 1e3, c2.len(), t2 * 1e3);
+    }
+    let refl = roadmark::pipeline::refline::RefLine::new(&iso.traj);
+    let so = |p: [f64; 2]| refl.locate(p);
+    for t in &iso.truth.lane_lines {
+        let st: Vec<[f64; 2]> = t.line.iter().map(|&p| so(p)).collect();
+        let o = st.iter().map(|q| q[1]).sum::<f64>() / st.len() as f64;
+        let near: Vec<String> = iso
+            .result
+            .lane_lines
+            .iter()
+            .filter_map(|r| {
+                let rs: Vec<[f64; 2]> = r.line.iter().map(|&p| so(p)).collect();
+                let ro = rs.iter().map(|q| q[1]).sum::<f64>() / rs.len() as f64;
+                ((ro - o).abs() < 1.0).then(|| format!("{} {:?} {:.0}..{:.0} o={ro:.2}", r.id, r.class, rs[0][0], rs[rs.len() - 1][0]))
+            })
+            .collect();
+        eprintln!("truth {} {:?} o={o:.2} s={:.0}..{:.0}: {}", t.id, t.class, st[0][0], st[st.len() - 1][0], near.join(" | "));
+    }
+    // Picture.
+    let o = iso.marks.origin;
+    let (px_s, px_o) = (0.1, 0.05);
+    let pts: Vec<[f64; 2]> = (0..iso.marks.len()).map(|i| so([iso.marks.x[i] + o[0], iso.marks.y[i] + o[1]])).collect();
+    let s_lo = pts.iter().map(|q| q[0]).fold(f64::INFINITY, f64::min);
+    let s_hi = pts.iter().map(|q| q[0]).fold(f64::NEG_INFINITY, f64::max);
+    let (o_lo, o_hi) = (-30.0, 30.0);
+    let w = ((s_hi - s_lo) / px_s) as usize + 1;
+    let h = ((o_hi - o_lo) / px_o) as usize + 1;
+    let mut img = vec![0u8; w * h * 3];
+    let mut put = |img: &mut Vec<u8>, q: [f64; 2], c: [u8; 3]| {
+        let (x, y) = (((q[0] - s_lo) / px_s) as i64, ((o_hi - q[1]) / px_o) as i64);
+        if x >= 0 && y >= 0 && (x as usize) < w && (y as usize) < h {
+            let i = (y as usize * w + x as usize) * 3;
+            img[i..i + 3].copy_from_slice(&c);
+        }
+    };
+    for q in &pts {
+        put(&mut img, *q, [110, 110, 110]);
+    }
+    let mut draw_line = |img: &mut Vec<u8>, line: &[[f64; 2]], closed: bool, c: [u8; 3]| {
+        let n = line.len();
+        let segs = if closed { n } else { n.saturating_sub(1) };
+        for i in 0..segs {
+            let (a, b) = (line[i], line[(i + 1) % n]);
+            let len = (b[0] - a[0]).hypot(b[1] - a[1]);
+            let k = (len / 0.03).ceil().max(1.0) as usize;
+            for j in 0..=k {
+                let f = j as f64 / k as f64;
+                put(img, so([a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1])]), c);
+            }
+        }
+    };
+    for m in &iso.result.markings {
+        let c = match m.class {
+            MarkingClass::SolidLine => [60, 120, 255],
+            MarkingClass::DashedLine => [0, 230, 230],
+            MarkingClass::Crosswalk => [255, 255, 0],
+            MarkingClass::StopLine => [255, 140, 0],
+            MarkingClass::Guideline => [150, 255, 150],
+            _ => [255, 0, 255],
+        };
+        draw_line(&mut img, &m.outline, true, c);
+    }
+    for t in &iso.truth.lane_lines {
+        draw_line(&mut img, &t.line, false, [0, 200, 0]);
+    }
+    for l in &iso.result.lane_lines {
+        draw_line(&mut img, &l.line, false, [255, 40, 40]);
+    }
+    // Tiles of at most 1500 px along the road.
+    let tile = 1500;
+    for (k, x0) in (0..w).step_by(tile).enumerate() {
+        let tw = tile.min(w - x0);
+        let mut data = Vec::with_capacity(tw * h * 3);
+        for y in 0..h {
+            data.extend_from_slice(&img[(y * w + x0) * 3..(y * w + x0 + tw) * 3]);
+        }
+        let path = dir.join(format!("debug_{k}.png"));
+        let f = std::fs::File::create(&path).expect("png file");
+        let mut enc = png::Encoder::new(std::io::BufWriter::new(f), tw as u32, h as u32);
+        enc.set_color(png::ColorType::Rgb);
+        enc.set_depth(png::BitDepth::Eight);
+        enc.write_header().expect("png header").write_image_data(&data).expect("png data");
+        eprintln!("wrote {} (s from {:.0})", path.display(), s_lo + x0 as f64 * px_s);
+    }
+}
+
+/// The simulator's truth covers the whole scene, beyond what the drive scanned. Keep what
+/// was observed: markings with ≥ 20 paint points, clipped (as lane lines are) to the
+/// mileage range of all paint points along the trajectory.
+fn clip_truth(
+    mut truth: roadmark::pipeline::types::Extraction,
+    cloud: &PointCloud,
+    labels: &[u32],
+    traj: &Trajectory,
+) -> roadmark::pipeline::types::Extraction {
+    use geo::BooleanOps;
+    let refl = roadmark::pipeline::refline::RefLine::new(traj);
+    let o = cloud.origin;
+    let mut counts = vec![0usize; truth.markings.len() + 1];
+    let (mut s_lo, mut s_hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for (i, &l) in labels.iter().enumerate() {
+        if l > 0 {
+            counts[(l as usize).min(truth.markings.len())] += 1;
+            if i % 7 == 0 {
+                let s = refl.locate([cloud.x[i] + o[0], cloud.y[i] + o[1]])[0];
+                s_lo = s_lo.min(s);
+                s_hi = s_hi.max(s);
+            }
+        }
+    }
+    let n = 400;
+    let mut ring: Vec<geo::Coord<f64>> = Vec::new();
+    for k in 0..=n {
+        let s = s_lo + (s_hi - s_lo) * k as f64 / n as f64;
+        let p = refl.point(s, -60.0);
+        ring.push(geo::coord! { x: p[0], y: p[1] });
+    }
+    for k in (0..=n).rev() {
+        let s = s_lo + (s_hi - s_lo) * k as f64 / n as f64;
+        let p = refl.point(s, 60.0);
+        ring.push(geo::coord! { x: p[0], y: p[1] });
+    }
+    let corridor = geo::Polygon::new(geo::LineString::new(ring), vec![]);
+    let mut kept = Vec::new();
+    for (k, mut m) in truth.markings.into_iter().enumerate() {
+        if counts[k + 1] < 20 {
+            continue;
+        }
+        let mut r: Vec<geo::Coord<f64>> = m.outline.iter().map(|p| geo::coord! { x: p[0], y: p[1] }).collect();
+        r.push(r[0]);
+        let poly = geo::Polygon::new(geo::LineString::new(r), vec![]);
+        let cut = poly.intersection(&corridor);
+        let Some(best) = cut.0.iter().max_by(|a, b| {
+            use geo::Area;
+            a.unsigned_area().total_cmp(&b.unsigned_area())
+        }) else {
+            continue;
+        };
+        let mut pts: Vec<[f64; 2]> = best.exterior().0.iter().map(|c| [c.x, c.y]).collect();
+        pts.pop();
+        m.outline = pts;
+        kept.push(m);
+    }
+    truth.markings = kept;
+    let ids: std::collections::HashSet<String> = truth.markings.iter().map(|m| m.id.clone()).collect();
+    truth.lane_lines = truth
+        .lane_lines
+        .into_iter()
+        .filter_map(|mut l| {
+            let st: Vec<f64> = l.line.iter().map(|&p| refl.locate(p)[0]).collect();
+            let mut out: Vec<[f64; 2]> = Vec::new();
+            for i in 0..l.line.len() {
+                let inside = st[i] >= s_lo && st[i] <= s_hi;
+                if i > 0 {
+                    let (a, b) = (st[i - 1], st[i]);
+                    for cut in [s_lo, s_hi] {
+                        if (a - cut) * (b - cut) < 0.0 {
+                            let f = (cut - a) / (b - a);
+                            let (p, q) = (l.line[i - 1], l.line[i]);
+                            out.push([p[0] + f * (q[0] - p[0]), p[1] + f * (q[1] - p[1])]);
+                        }
+                    }
+                }
+                if inside {
+                    out.push(l.line[i]);
+                }
+            }
+            l.marking_ids.retain(|id| ids.contains(id));
+            let len: f64 = out.windows(2).map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1])).sum();
+            (len >= 10.0 && !l.marking_ids.is_empty()).then(|| {
+                l.line = out;
+                l.length_m = len;
+                l
+            })
+        })
+        .collect();
+    truth
 }

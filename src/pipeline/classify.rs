@@ -30,7 +30,7 @@
 //!      `stop_line`;
 //!    - filled bar along the road (≤ 25°), 0.3–0.65 m wide, 1.5–10 m long, with a parallel
 //!      neighbour stripe of similar size ≤ 2.5 m away → `crosswalk` (zebra stripes run
-//!      along the road);
+//!      along the road); a lone one that passed the line test is a wide dash;
 //!    - filled bar diagonal (25–65°), 0.25–0.8 m wide, with a parallel neighbour ≤ 6 m away
 //!      → `guideline` (chevron/hatch stripes);
 //!    - a thin or filled elongated shape steeper than `noise_angle_deg` (Yao 2021: 45°) to
@@ -69,7 +69,8 @@ pub struct Params {
     /// Compact blobs (both sides ≤ this, aspect < 1.6) are dropped: manhole covers and the
     /// like. Default 1.0 m.
     pub blob_max_size_m: f64,
-    /// Widest single painted line (m). Default 0.35 (lines are 0.10–0.25 m).
+    /// Widest single painted line (m). Default 0.55 (lane lines are 0.10–0.25 m; GB
+    /// acceleration-lane dashes and wide edge lines are 0.45 m).
     pub line_max_width_m: f64,
     /// Largest angle between a line piece and the trajectory (deg). Default 20.
     pub line_max_angle_deg: f64,
@@ -98,7 +99,7 @@ impl Default for Params {
             min_points: 10,
             min_area_m2: 0.02,
             blob_max_size_m: 1.0,
-            line_max_width_m: 0.35,
+            line_max_width_m: 0.55,
             line_max_angle_deg: 20.0,
             solid_min_length_m: 7.0,
             solid_min_ratio: 20.0,
@@ -260,13 +261,7 @@ pub fn assess(
 }
 
 /// Features of one group of points; class left `Unknown` (rules come later).
-fn describe(
-    xy: &[[f64; 2]],
-    intensity: &[f32],
-    mut idx: Vec<usize>,
-    refl: &RefLine,
-    p: &Params,
-) -> Candidate {
+fn describe(xy: &[[f64; 2]], intensity: &[f32], mut idx: Vec<usize>, refl: &RefLine, p: &Params) -> Candidate {
     idx.sort_unstable();
     let pts: Vec<[f64; 2]> = idx.iter().map(|&i| xy[i]).collect();
     let bar = BarShape::of(&pts);
@@ -277,10 +272,8 @@ fn describe(
     let mean_intensity = if idx.is_empty() {
         0.0
     } else {
-        (idx.iter()
-            .map(|&i| intensity.get(i).copied().unwrap_or(0.0) as f64)
-            .sum::<f64>()
-            / idx.len() as f64) as f32
+        (idx.iter().map(|&i| intensity.get(i).copied().unwrap_or(0.0) as f64).sum::<f64>() / idx.len() as f64)
+            as f32
     };
     let shape = Shape {
         center,
@@ -371,21 +364,13 @@ fn line_geometry(pts: &[[f64; 2]], refl: &RefLine, p: &Params) -> Option<LineGeo
     }
     let angle = slope.abs().atan().to_degrees();
     // Local angles too: a piece bending across the road is not a lane line.
-    if angle > p.line_max_angle_deg
-        || ks
-            .iter()
-            .any(|&s| fit(s).1.abs().atan().to_degrees() > p.line_max_angle_deg + 10.0)
-    {
+    if angle > p.line_max_angle_deg || ks.iter().any(|&s| fit(s).1.abs().atan().to_degrees() > p.line_max_angle_deg + 10.0) {
         return None;
     }
     // Ends: the first/last points, ignoring a lone stray beyond a slice gap.
     let first = (0..ns).find(|&k| slices[k].len() >= 2).unwrap_or(0);
     let last = (0..ns).rev().find(|&k| slices[k].len() >= 2).unwrap_or(ns - 1);
-    let s0 = so
-        .iter()
-        .map(|q| q[0])
-        .find(|&s| s >= s_lo + first as f64 * ds)
-        .unwrap_or(s_lo);
+    let s0 = so.iter().map(|q| q[0]).find(|&s| s >= s_lo + first as f64 * ds).unwrap_or(s_lo);
     let s1 = so
         .iter()
         .rev()
@@ -429,11 +414,7 @@ struct End {
 fn piece_end(c: &Candidate, p: &Params) -> Option<End> {
     if let Some(l) = &c.line {
         let (a, b) = (l.stations[0], l.stations[l.stations.len() - 1]);
-        let slope = if b[0] - a[0] > 1e-6 {
-            (b[1] - a[1]) / (b[0] - a[0])
-        } else {
-            0.0
-        };
+        let slope = if b[0] - a[0] > 1e-6 { (b[1] - a[1]) / (b[0] - a[0]) } else { 0.0 };
         return Some(End {
             s0: a[0],
             s1: b[0],
@@ -460,13 +441,7 @@ fn piece_end(c: &Candidate, p: &Params) -> Option<End> {
 }
 
 /// Merge broken pieces of one line (mutual best successor within `join_gap_m`).
-fn rejoin(
-    feats: Vec<Candidate>,
-    xy: &[[f64; 2]],
-    intensity: &[f32],
-    refl: &RefLine,
-    p: &Params,
-) -> Vec<Candidate> {
+fn rejoin(feats: Vec<Candidate>, xy: &[[f64; 2]], intensity: &[f32], refl: &RefLine, p: &Params) -> Vec<Candidate> {
     if p.join_gap_m <= 0.0 {
         return feats;
     }
@@ -486,9 +461,7 @@ fn rejoin(
         let dev = (eb.o0 - pred).abs();
         let wmax = ea.width.max(eb.width).max(0.05);
         let tol = 0.5 * wmax + 0.03;
-        if dev > tol
-            || ea.width.min(eb.width) < 0.4 * wmax && feats[a].line.is_some() && feats[b].line.is_some()
-        {
+        if dev > tol || ea.width.min(eb.width) < 0.4 * wmax && feats[a].line.is_some() && feats[b].line.is_some() {
             return None;
         }
         Some(dev / tol + gap.max(0.0) / p.join_gap_m)
@@ -541,8 +514,7 @@ fn rejoin(
         groups.entry(r).or_default().push(i);
     }
     let mut slots: Vec<Option<Candidate>> = feats.into_iter().map(Some).collect();
-    let (single, multi): (Vec<Vec<usize>>, Vec<Vec<usize>>) =
-        groups.into_values().partition(|g| g.len() == 1);
+    let (single, multi): (Vec<Vec<usize>>, Vec<Vec<usize>>) = groups.into_values().partition(|g| g.len() == 1);
     let mut out: Vec<Candidate> = single
         .into_iter()
         .map(|g| slots[g[0]].take().expect("each candidate once"))
@@ -589,7 +561,15 @@ fn rule(mut c: Candidate, p: &Params) -> (Candidate, Option<DropReason>) {
         if l.width_m <= p.line_max_width_m {
             let ratio = l.length_m / l.width_m.max(0.05);
             let wq = inside(l.width_m, 0.06, p.line_max_width_m);
-            if l.length_m >= p.solid_min_length_m && ratio >= p.solid_min_ratio {
+            let stripe = l.width_m >= p.crosswalk_min_width_m
+                && l.width_m <= p.crosswalk_max_width_m
+                && (1.5..=10.0).contains(&l.length_m);
+            if stripe {
+                // A wide dash or a zebra stripe: `confirm_groups` decides by its neighbours
+                // (stripes side by side across the road, dashes one after the other).
+                c.class = MarkingClass::Crosswalk;
+                c.confidence = 0.8 * inside(l.width_m, p.crosswalk_min_width_m, p.crosswalk_max_width_m);
+            } else if l.length_m >= p.solid_min_length_m && ratio >= p.solid_min_ratio {
                 c.class = MarkingClass::SolidLine;
                 c.confidence = (0.75 + 0.25 * (l.length_m / (2.0 * p.solid_min_length_m)).min(1.0)) * wq;
             } else if l.length_m >= p.dash_min_length_m {
@@ -607,16 +587,10 @@ fn rule(mut c: Candidate, p: &Params) -> (Candidate, Option<DropReason>) {
     }
     let bar = s.fill_ratio >= 0.65 && aspect >= 2.5;
     let ang = s.angle_to_trajectory_deg;
-    if bar
-        && ang >= 60.0
-        && s.width_m >= p.stop_min_width_m
-        && s.width_m <= p.stop_max_width_m
-        && s.length_m >= 1.5
+    if bar && ang >= 60.0 && s.width_m >= p.stop_min_width_m && s.width_m <= p.stop_max_width_m && s.length_m >= 1.5
     {
         c.class = MarkingClass::StopLine;
-        c.confidence = 0.8
-            * inside(s.width_m, p.stop_min_width_m, p.stop_max_width_m)
-            * inside(ang, 45.0, 135.0).max(0.8);
+        c.confidence = 0.8 * inside(s.width_m, p.stop_min_width_m, p.stop_max_width_m);
         return (c, None);
     }
     if bar
@@ -662,6 +636,9 @@ fn confirm_groups(items: &mut [(Candidate, Option<DropReason>)]) {
                     && geom::acute_angle_deg(a.axis, b.axis) <= 10.0
                     && a.width_m.min(b.width_m) >= 0.6 * a.width_m.max(b.width_m)
                     && a.length_m.min(b.length_m) >= 0.5 * a.length_m.max(b.length_m)
+                    // side by side, not one after the other
+                    && ((b.center[0] - a.center[0]) * a.axis[0] + (b.center[1] - a.center[1]) * a.axis[1]).abs()
+                        <= 0.5 * a.length_m.max(b.length_m)
             });
             verdict[i] = Some(ok);
         }
@@ -672,8 +649,14 @@ fn confirm_groups(items: &mut [(Candidate, Option<DropReason>)]) {
             if c.class == MarkingClass::Guideline && c.shape.angle_to_trajectory_deg > 45.0 {
                 *d = Some(DropReason::SteepNoise);
             }
-            c.class = MarkingClass::Unknown;
-            c.confidence = 0.4;
+            if c.class == MarkingClass::Crosswalk && c.line.is_some() {
+                // A lone wide stripe along the road is a wide dash.
+                c.class = MarkingClass::DashedLine;
+                c.confidence = 0.7;
+            } else {
+                c.class = MarkingClass::Unknown;
+                c.confidence = 0.4;
+            }
         }
     }
 }

@@ -56,6 +56,11 @@ pub struct Params {
     /// Connectivity radius of the Euclidean clustering (m). Default 0.25 (papers: 0.5, which
     /// merges side-by-side markings). Must be in (0, 2].
     pub radius_m: f64,
+    /// Largest radius for sparse points (m): a point with fewer than 2 neighbours within
+    /// `radius_m` (far-range paint, 0.1–0.3 m apart) connects up to
+    /// `min(max_radius_m, 2 × its 2nd-neighbour distance)` to other sparse points. Dense
+    /// points keep `radius_m`. Default 0.6; set equal to `radius_m` to disable.
+    pub max_radius_m: f64,
     /// Components with fewer points are dropped as noise. Default 5.
     pub min_points: usize,
     /// Split merged objects (dash touching a solid line, parallel lines, arrow touching a
@@ -75,6 +80,7 @@ impl Default for Params {
     fn default() -> Self {
         Self {
             radius_m: 0.25,
+            max_radius_m: 0.6,
             min_points: 5,
             split: true,
             max_line_width_m: 0.35,
@@ -89,6 +95,12 @@ impl Params {
     pub fn validate(&self) -> Result<(), String> {
         if !(self.radius_m > 0.0 && self.radius_m <= 2.0) {
             return Err(format!("radius_m must be in (0, 2], got {}", self.radius_m));
+        }
+        if !(self.max_radius_m >= self.radius_m && self.max_radius_m <= 3.0) {
+            return Err(format!(
+                "max_radius_m must be in [radius_m, 3], got {}",
+                self.max_radius_m
+            ));
         }
         if self.min_points == 0 {
             return Err("min_points must be at least 1".into());
@@ -134,7 +146,7 @@ pub fn run(cloud: &PointCloud, params: &Params) -> Vec<Cluster> {
         .filter(|&i| xy[i][0].is_finite() && xy[i][1].is_finite())
         .collect();
     let fxy: Vec<[f64; 2]> = finite.iter().map(|&i| xy[i]).collect();
-    let comps = geom::components(&fxy, params.radius_m);
+    let comps = geom::components_adaptive(&fxy, params.radius_m, params.max_radius_m, 2);
     let mut groups: Vec<(Vec<usize>, bool)> = comps
         .into_par_iter()
         .filter(|c| c.len() >= params.min_points)
@@ -485,8 +497,51 @@ fn find_valley(vals: &[f64], bin: f64, min_sep: f64, p: &Params) -> Option<f64> 
     (rpk - lpk >= sep_bins).then_some(cut)
 }
 
+/// Is this cluster one painted line, straight or curved: are the residuals about a smoothed
+/// centre (local quadratic of 0.5 m slice means) as narrow as a line?
+fn clean_line(pts: &[[f64; 2]], p: &Params) -> bool {
+    let pca = Pca::of(pts);
+    let uv = frame(pts, &pca);
+    let mut us: Vec<(f64, f64)> = uv.iter().map(|q| (q[0], q[1])).collect();
+    us.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let (umin, umax) = (us[0].0, us[us.len() - 1].0);
+    let len = umax - umin;
+    const DS: f64 = 0.5;
+    let ns = (len / DS).ceil() as usize + 1;
+    let mut acc = vec![(0.0, 0.0, 0.0); ns];
+    for &(u, v) in &us {
+        let k = (((u - umin) / DS) as usize).min(ns - 1);
+        acc[k].0 += u;
+        acc[k].1 += v;
+        acc[k].2 += 1.0;
+    }
+    let (mut su, mut sv, mut sw) = (Vec::new(), Vec::new(), Vec::new());
+    for a in acc.iter().filter(|a| a.2 > 0.0) {
+        su.push(a.0 / a.2);
+        sv.push(a.1 / a.2);
+        sw.push(a.2);
+    }
+    let h = (len / 10.0).max(2.0);
+    let centre: Vec<f64> = su
+        .iter()
+        .map(|&u| geom::local_quadratic(&su, &sv, &sw, u, h, 1.0).unwrap_or(0.0))
+        .collect();
+    let mut resid: Vec<f64> = us
+        .iter()
+        .map(|&(u, v)| {
+            let j = su.partition_point(|&x| x < u).min(su.len() - 1);
+            v - centre[j]
+        })
+        .collect();
+    resid.sort_unstable_by(f64::total_cmp);
+    let (a, b) = geom::robust_extent(&resid);
+    b - a <= 1.3 * p.max_line_width_m
+}
+
 /// Hough search for the densest straight bar; split off attached parallel bars and
-/// perpendicular objects the bar overhangs.
+/// perpendicular objects the bar overhangs. On long clusters (> 10 m from the centre) the
+/// bar must be a long thin line (≥ 10 m, ≤ `max_line_width_m`), and everything attached to
+/// it is split off: gore-area chevrons, wide dashes or arrows touching an edge line.
 fn bar_split(pts: &[[f64; 2]], p: &Params) -> Option<Vec<Vec<usize>>> {
     let n = pts.len();
     if n < 30 {
@@ -496,9 +551,15 @@ fn bar_split(pts: &[[f64; 2]], p: &Params) -> Option<Vec<Vec<usize>>> {
     let c = pca.center;
     let rel: Vec<[f64; 2]> = pts.iter().map(|q| [q[0] - c[0], q[1] - c[1]]).collect();
     let ext = rel.iter().fold(0.0f64, |a, q| a.max(q[0].hypot(q[1])));
-    if ext > 10.0 {
+    // Long clusters: only a long thin straight line (an edge or lane line with things
+    // touching it) is looked for, and a clean (possibly curved) line is left alone.
+    let long = ext > 10.0;
+    if long && clean_line(pts, p) {
         return None;
     }
+    // The direction search runs on at most ~20 000 points.
+    let stride = (n / 20_000).max(1);
+    let srel: Vec<[f64; 2]> = rel.iter().step_by(stride).copied().collect();
     const BIN: f64 = 0.05;
     let nb = (2.0 * ext / BIN).ceil() as usize + 3;
     // Score of a direction: points in the best window of `WIN` bins across it. A window as
@@ -508,7 +569,7 @@ fn bar_split(pts: &[[f64; 2]], p: &Params) -> Option<Vec<Vec<usize>>> {
         h.clear();
         h.resize(nb, 0);
         let (s, co) = theta.sin_cos();
-        for q in &rel {
+        for q in &srel {
             let d = -s * q[0] + co * q[1];
             h[(((d + ext) / BIN) as usize + 1).min(nb - 1)] += 1;
         }
@@ -544,7 +605,7 @@ fn bar_split(pts: &[[f64; 2]], p: &Params) -> Option<Vec<Vec<usize>>> {
                 best = (sc, i, th);
             }
         }
-        if let Some(parts) = bar_split_at(pts, &rel, ext, best.2, best.1, p, &score_at) {
+        if let Some(parts) = bar_split_at(pts, &rel, ext, best.2, best.1, long, p, &score_at) {
             return Some(parts);
         }
     }
@@ -558,6 +619,7 @@ fn bar_split_at(
     ext: f64,
     theta: f64,
     w0: usize,
+    long: bool,
     p: &Params,
     score_at: &dyn Fn(f64, &mut Vec<u32>) -> (u32, usize),
 ) -> Option<Vec<Vec<usize>>> {
@@ -607,15 +669,19 @@ fn bar_split_at(
         .collect();
     strip.sort_by(|&x, &y| along(&rel[x]).total_cmp(&along(&rel[y])));
     let mut runs: Vec<Vec<usize>> = Vec::new();
+    let run_gap = if long { p.max_radius_m } else { p.radius_m };
     for &i in &strip {
         match runs.last_mut() {
-            Some(r) if along(&rel[i]) - along(&rel[*r.last().expect("non-empty")]) <= p.radius_m => r.push(i),
+            Some(r) if along(&rel[i]) - along(&rel[*r.last().expect("non-empty")]) <= run_gap => r.push(i),
             _ => runs.push(vec![i]),
         }
     }
     let mut bar = runs.into_iter().max_by_key(|r| r.len())?;
     let (ba, bb) = (along(&rel[bar[0]]), along(&rel[*bar.last()?]));
     if bb - ba < 2.0 || bar.len() as f64 >= 0.85 * n as f64 {
+        return None;
+    }
+    if long && (bb - ba < 10.0 || nhi - nlo > p.max_line_width_m + 0.05) {
         return None;
     }
     let mut in_bar = vec![false; n];
@@ -647,12 +713,16 @@ fn bar_split_at(
                 same_side += 1;
             }
         }
+        let one_side = same_side as f64 >= 0.95 * part.len() as f64;
         let perpendicular = phi >= 60.0
             && pa - ba >= 0.3
             && bb - pb >= 0.3
             && (bb - ba) >= 2.5 * (pb - pa)
-            && same_side as f64 >= 0.95 * part.len() as f64;
-        if parallel || perpendicular {
+            && one_side;
+        // A filled stripe touching the bar at an angle (chevrons on an edge line).
+        let diagonal = phi > 20.0 && phi < 70.0 && one_side && shape.length() >= 1.0 && filled_bar(&pxy).is_some();
+        // A long line takes nothing with it: whatever touches it is another object.
+        if long || parallel || perpendicular || diagonal {
             out.push(part);
         } else {
             bar.extend(part);

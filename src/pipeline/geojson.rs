@@ -133,8 +133,9 @@ fn lane_properties(l: &LaneLine) -> Value {
 }
 
 /// Closed ring; counter-clockwise when `ccw` (RFC 7946), else in the given orientation.
+/// Repeated consecutive vertices (rounding can merge near ones) are removed.
 fn closed_ring(outline: &[[f64; 2]], ccw: bool) -> Vec<[f64; 2]> {
-    let mut ring = outline.to_vec();
+    let mut ring = distinct_ring(outline);
     if ccw && signed_area2(&ring) < 0.0 {
         ring.reverse();
     }
@@ -144,22 +145,43 @@ fn closed_ring(outline: &[[f64; 2]], ccw: bool) -> Vec<[f64; 2]> {
     ring
 }
 
+/// The ring without consecutive repeats (and without a closing repeat of the first vertex).
+fn distinct_ring(outline: &[[f64; 2]]) -> Vec<[f64; 2]> {
+    let mut ring = outline.to_vec();
+    ring.dedup();
+    while ring.len() > 1 && ring.first() == ring.last() {
+        ring.pop();
+    }
+    ring
+}
+
+/// The polyline without consecutive repeats.
+fn distinct_line(line: &[[f64; 2]]) -> Vec<[f64; 2]> {
+    let mut l = line.to_vec();
+    l.dedup();
+    l
+}
+
 fn feature(geometry: Value, properties: Value) -> Value {
     json!({"type": "Feature", "geometry": geometry, "properties": properties})
 }
 
+/// The features; a marking whose outline has fewer than 3 distinct vertices, or a lane line
+/// with fewer than 2 distinct positions (possible only after rounding to WGS84 decimals, for
+/// features of about a centimetre), is left out: it would be invalid GeoJSON.
 fn collection(ex: &Extraction, polygon_ccw: bool) -> Vec<Value> {
     ex.markings
         .iter()
+        .filter(|m| distinct_ring(&m.outline).len() >= 3)
         .map(|m| {
             feature(
                 json!({"type": "Polygon", "coordinates": [closed_ring(&m.outline, polygon_ccw)]}),
                 marking_properties(m),
             )
         })
-        .chain(ex.lane_lines.iter().map(|l| {
+        .chain(ex.lane_lines.iter().filter(|l| distinct_line(&l.line).len() >= 2).map(|l| {
             feature(
-                json!({"type": "LineString", "coordinates": l.line}),
+                json!({"type": "LineString", "coordinates": distinct_line(&l.line)}),
                 lane_properties(l),
             )
         }))

@@ -171,6 +171,106 @@ pub fn components(xy: &[[f64; 2]], r: f64) -> Vec<Vec<usize>> {
     out
 }
 
+/// Connected components with a radius that adapts to the local point density: points with
+/// fewer than `k` neighbours within `r_min` (sparse far-range paint) get
+/// `r_i = clamp(2 · d_k, r_min, r_max)`, `d_k` being their k-th neighbour distance, and two
+/// points join when their distance is ≤ min(r_i, r_j). Dense points keep `r_min`, so dense
+/// side-by-side markings stay apart while a sparse far line is not shattered. Symmetric,
+/// hence independent of the point order. Output as [`components`].
+pub fn components_adaptive(xy: &[[f64; 2]], r_min: f64, r_max: f64, k: usize) -> Vec<Vec<usize>> {
+    let base = components(xy, r_min);
+    if r_max <= r_min || xy.is_empty() {
+        return base;
+    }
+    let mut label = vec![0usize; xy.len()];
+    for (g, c) in base.iter().enumerate() {
+        for &i in c {
+            label[i] = g;
+        }
+    }
+    let cell = r_min / 2.0;
+    let grid = GridIndex::new(xy, cell);
+    let reach = (r_max / 2.0 / cell).ceil() as i64;
+    let radius: Vec<f64> = (0..xy.len())
+        .map(|i| {
+            let p = xy[i];
+            let key = ((p[0] / cell).floor() as i64, (p[1] / cell).floor() as i64);
+            // A full own cell means k neighbours within r_min: dense, the common case.
+            if grid.slice(key).is_some_and(|s| s.len() > k) {
+                return r_min;
+            }
+            let mut d: Vec<f64> = Vec::new();
+            for dx in -reach..=reach {
+                for dy in -reach..=reach {
+                    if let Some(s) = grid.slice((key.0 + dx, key.1 + dy)) {
+                        for &j in s {
+                            if j as usize != i {
+                                let q = xy[j as usize];
+                                d.push((q[0] - p[0]).hypot(q[1] - p[1]));
+                            }
+                        }
+                    }
+                }
+            }
+            if d.len() < k {
+                return r_max;
+            }
+            d.select_nth_unstable_by(k - 1, f64::total_cmp);
+            (2.0 * d[k - 1]).clamp(r_min, r_max)
+        })
+        .collect();
+    let sparse: Vec<usize> = (0..xy.len()).filter(|&i| radius[i] > r_min).collect();
+    if sparse.is_empty() {
+        return base;
+    }
+    let sxy: Vec<[f64; 2]> = sparse.iter().map(|&i| xy[i]).collect();
+    let sgrid = GridIndex::new(&sxy, r_max);
+    let mut parent: Vec<usize> = (0..base.len()).collect();
+    fn find(p: &mut [usize], mut a: usize) -> usize {
+        while p[a] != a {
+            p[a] = p[p[a]];
+            a = p[a];
+        }
+        a
+    }
+    for (a, &i) in sparse.iter().enumerate() {
+        let p = xy[i];
+        let key = ((p[0] / r_max).floor() as i64, (p[1] / r_max).floor() as i64);
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                let Some(s) = sgrid.slice((key.0 + dx, key.1 + dy)) else { continue };
+                for &b in s {
+                    let j = sparse[b as usize];
+                    if b as usize <= a {
+                        continue;
+                    }
+                    let q = xy[j];
+                    if (q[0] - p[0]).hypot(q[1] - p[1]) <= radius[i].min(radius[j]) {
+                        let (ra, rb) = (find(&mut parent, label[i]), find(&mut parent, label[j]));
+                        if ra != rb {
+                            parent[ra.max(rb)] = ra.min(rb);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    let mut groups: HashMap<usize, Vec<usize>> = HashMap::new();
+    for (g, c) in base.into_iter().enumerate() {
+        let r = find(&mut parent, g);
+        groups.entry(r).or_default().extend(c);
+    }
+    let mut out: Vec<Vec<usize>> = groups
+        .into_values()
+        .map(|mut g| {
+            g.sort_unstable();
+            g
+        })
+        .collect();
+    out.sort_unstable_by_key(|g| g[0]);
+    out
+}
+
 /// Median nearest-neighbour distance of (a deterministic subsample of) the points; a proxy
 /// for the point spacing. `None` with fewer than 2 points or no neighbour within `max_r`.
 pub fn spacing(xy: &[[f64; 2]], max_r: f64) -> Option<f64> {
@@ -567,6 +667,22 @@ mod tests {
         let mut want: Vec<Vec<usize>> = groups.into_values().collect();
         want.sort_unstable_by_key(|g| g[0]);
         assert_eq!(components(&pts, r), want);
+    }
+
+    #[test]
+    fn adaptive_components_join_sparse_lines_only() {
+        // A sparse line (0.4 m spacing) and, beside it, two dense bars 0.3 m apart.
+        let mut pts: Vec<[f64; 2]> = (0..20).map(|i| [i as f64 * 0.4, 5.0]).collect();
+        for i in 0..200 {
+            for j in 0..5 {
+                pts.push([i as f64 * 0.02, j as f64 * 0.03]);
+                pts.push([i as f64 * 0.02, 0.42 + j as f64 * 0.03]);
+            }
+        }
+        assert_eq!(components(&pts, 0.25).len(), 22);
+        let c = components_adaptive(&pts, 0.25, 0.9, 2);
+        assert_eq!(c.len(), 3, "sparse line joined, dense bars kept apart");
+        assert_eq!(components_adaptive(&pts, 0.25, 0.25, 2), components(&pts, 0.25));
     }
 
     #[test]

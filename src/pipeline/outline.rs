@@ -7,7 +7,7 @@
 //! - Irregular marks (arrows, diamonds, unknown) get an alpha shape (Edelsbrunner 1983, as
 //!   in Yao 2021 for guidelines): Delaunay triangles (spade) with circumradius ≤ R are kept;
 //!   boundary edges belong to exactly one kept triangle and are chained into rings; the ring
-//!   of largest area is the outline. R starts at `max(0.15 m, 3 × point spacing)` and
+//!   of largest area of the largest connected piece is the outline. R starts at `max(0.15 m, 3 × point spacing)` and
 //!   doubles (up to 3 times) while the outline holds < 95 % of the points; the convex hull
 //!   is the last resort.
 //!
@@ -72,8 +72,7 @@ pub fn convex_hull(pts: &[[f64; 2]]) -> Vec<[f64; 2]> {
     if p.len() < 3 {
         return p;
     }
-    let cross =
-        |o: [f64; 2], a: [f64; 2], b: [f64; 2]| (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]);
+    let cross = |o: [f64; 2], a: [f64; 2], b: [f64; 2]| (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]);
     let mut hull: Vec<[f64; 2]> = Vec::with_capacity(2 * p.len());
     for &q in &p {
         while hull.len() >= 2 && cross(hull[hull.len() - 2], hull[hull.len() - 1], q) <= 0.0 {
@@ -92,14 +91,12 @@ pub fn convex_hull(pts: &[[f64; 2]]) -> Vec<[f64; 2]> {
     hull
 }
 
-/// The outer ring of the alpha shape with circumradius bound `radius`, counter-clockwise.
-/// None when no triangle survives (too few or collinear points, or R too small).
-pub fn alpha_shape(pts: &[[f64; 2]], radius: f64) -> Option<Vec<[f64; 2]>> {
-    let mut uniq: Vec<[f64; 2]> = pts
-        .iter()
-        .copied()
-        .filter(|p| p[0].is_finite() && p[1].is_finite())
-        .collect();
+/// The alpha shape with circumradius bound `radius`: the outer ring (counter-clockwise) of
+/// its largest connected piece, and the fraction of the (distinct) input points that are
+/// vertices of that piece. None when no triangle survives (too few or collinear points, or
+/// R too small).
+pub fn alpha_shape(pts: &[[f64; 2]], radius: f64) -> Option<(Vec<[f64; 2]>, f64)> {
+    let mut uniq: Vec<[f64; 2]> = pts.iter().copied().filter(|p| p[0].is_finite() && p[1].is_finite()).collect();
     uniq.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
     uniq.dedup();
     if uniq.len() < 3 {
@@ -108,7 +105,8 @@ pub fn alpha_shape(pts: &[[f64; 2]], radius: f64) -> Option<Vec<[f64; 2]>> {
     let verts: Vec<Point2<f64>> = uniq.iter().map(|p| Point2::new(p[0], p[1])).collect();
     let tri: DelaunayTriangulation<Point2<f64>> = DelaunayTriangulation::bulk_load_stable(verts).ok()?;
     let r2 = radius * radius;
-    let mut kept = vec![false; tri.num_all_faces()];
+    let nf = tri.num_all_faces();
+    let mut kept = vec![false; nf];
     let mut any = false;
     for f in tri.inner_faces() {
         let (_, rr) = f.circumcircle();
@@ -120,20 +118,59 @@ pub fn alpha_shape(pts: &[[f64; 2]], radius: f64) -> Option<Vec<[f64; 2]>> {
     if !any {
         return None;
     }
-    // Boundary edges, directed counter-clockwise around the kept region.
-    let mut next: HashMap<usize, Vec<usize>> = HashMap::new();
-    let mut nedges = 0usize;
+    // Connected pieces of kept triangles (through shared edges).
+    let mut parent: Vec<usize> = (0..nf).collect();
+    fn find(p: &mut [usize], mut a: usize) -> usize {
+        while p[a] != a {
+            p[a] = p[p[a]];
+            a = p[a];
+        }
+        a
+    }
     for f in tri.inner_faces() {
-        if !kept[f.fix().index()] {
+        let fi = f.fix().index();
+        if !kept[fi] {
             continue;
         }
         for e in f.adjacent_edges() {
-            let other = e.rev().face();
-            let other_kept = other.as_inner().is_some_and(|o| kept[o.fix().index()]);
+            if let Some(o) = e.rev().face().as_inner() {
+                let oi = o.fix().index();
+                if kept[oi] {
+                    let (a, b) = (find(&mut parent, fi), find(&mut parent, oi));
+                    parent[a.max(b)] = a.min(b);
+                }
+            }
+        }
+    }
+    let mut piece_area: HashMap<usize, f64> = HashMap::new();
+    for f in tri.inner_faces() {
+        let fi = f.fix().index();
+        if kept[fi] {
+            let [a, b, c] = f.positions();
+            let area = ((b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x)).abs() / 2.0;
+            *piece_area.entry(find(&mut parent, fi)).or_default() += area;
+        }
+    }
+    let best = piece_area
+        .iter()
+        .max_by(|a, b| a.1.total_cmp(b.1).then(b.0.cmp(a.0)))
+        .map(|(&k, _)| k)?;
+    // Boundary edges of that piece, directed counter-clockwise; covered vertices.
+    let mut next: HashMap<usize, Vec<usize>> = HashMap::new();
+    let mut covered = vec![false; tri.num_vertices()];
+    let mut nedges = 0usize;
+    for f in tri.inner_faces() {
+        let fi = f.fix().index();
+        if !kept[fi] || find(&mut parent, fi) != best {
+            continue;
+        }
+        for v in f.vertices() {
+            covered[v.fix().index()] = true;
+        }
+        for e in f.adjacent_edges() {
+            let other_kept = e.rev().face().as_inner().is_some_and(|o| kept[o.fix().index()]);
             if !other_kept {
-                next.entry(e.from().fix().index())
-                    .or_default()
-                    .push(e.to().fix().index());
+                next.entry(e.from().fix().index()).or_default().push(e.to().fix().index());
                 nedges += 1;
             }
         }
@@ -150,7 +187,6 @@ pub fn alpha_shape(pts: &[[f64; 2]], radius: f64) -> Option<Vec<[f64; 2]>> {
         .collect();
     // Chain edges into rings (a vertex touching two rings has two outgoing edges).
     let mut rings: Vec<Vec<[f64; 2]>> = Vec::new();
-    let mut used = 0usize;
     let mut starts: Vec<usize> = next.keys().copied().collect();
     starts.sort_unstable();
     for s in starts {
@@ -160,7 +196,6 @@ pub fn alpha_shape(pts: &[[f64; 2]], radius: f64) -> Option<Vec<[f64; 2]>> {
             loop {
                 let Some(list) = next.get_mut(&cur) else { break };
                 let Some(nx) = list.pop() else { break };
-                used += 1;
                 if nx == s {
                     break;
                 }
@@ -175,11 +210,12 @@ pub fn alpha_shape(pts: &[[f64; 2]], radius: f64) -> Option<Vec<[f64; 2]>> {
             }
         }
     }
-    debug_assert!(used <= nedges);
+    let frac = covered.iter().filter(|&&c| c).count() as f64 / covered.len() as f64;
     rings
         .into_iter()
         .filter(|r| signed_area2(r) > 0.0)
         .max_by(|a, b| signed_area2(a).total_cmp(&signed_area2(b)))
+        .map(|r| (r, frac))
 }
 
 /// Alpha-shape outline holding at least 95 % of the points (radius grown as needed), else
@@ -187,9 +223,8 @@ pub fn alpha_shape(pts: &[[f64; 2]], radius: f64) -> Option<Vec<[f64; 2]>> {
 pub fn irregular(pts: &[[f64; 2]], spacing: f64) -> Vec<[f64; 2]> {
     let mut r = (3.0 * spacing).max(0.15);
     for _ in 0..4 {
-        if let Some(ring) = alpha_shape(pts, r) {
-            let inside = pts.iter().filter(|&&p| contains(&ring, p, 1e-6)).count();
-            if inside as f64 >= 0.95 * pts.len() as f64 {
+        if let Some((ring, frac)) = alpha_shape(pts, r) {
+            if frac >= 0.95 {
                 return ring;
             }
         }
@@ -228,16 +263,10 @@ pub fn buffered_line(line: &[[f64; 2]], half_width: f64) -> Vec<[f64; 2]> {
         .collect();
     let mut ring: Vec<[f64; 2]> = Vec::with_capacity(2 * n);
     for i in 0..n {
-        ring.push([
-            line[i][0] - normals[i][0] * half_width,
-            line[i][1] - normals[i][1] * half_width,
-        ]);
+        ring.push([line[i][0] - normals[i][0] * half_width, line[i][1] - normals[i][1] * half_width]);
     }
     for i in (0..n).rev() {
-        ring.push([
-            line[i][0] + normals[i][0] * half_width,
-            line[i][1] + normals[i][1] * half_width,
-        ]);
+        ring.push([line[i][0] + normals[i][0] * half_width, line[i][1] + normals[i][1] * half_width]);
     }
     ring
 }
