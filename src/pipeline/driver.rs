@@ -354,8 +354,11 @@ fn marking_points(
             ctx.progress.report("rasterize", base + 0.25 * step);
             let t0 = Instant::now();
             let gather_f64 = |v: &[f64]| pav.iter().map(|&i| v[i]).collect::<Vec<f64>>();
-            let (px, py) = (gather_f64(&c.x), gather_f64(&c.y));
-            let offs = gather_f64(&c.offset);
+            // The raster lives in trajectory coordinates (x = mileage, y = offset): lines run
+            // along its rows, the along-track detector is a separable filter, and the grid
+            // is global along the drive.
+            let (px, offs) = (gather_f64(&c.mileage), gather_f64(&c.offset));
+            let py = offs.clone();
             let slice: Vec<i64> = pav
                 .iter()
                 .map(|&i| pavement::slice_of(c.mileage[i], p.pavement.slice_length_m))

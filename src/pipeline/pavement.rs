@@ -91,6 +91,14 @@ pub struct Params {
     pub max_gap_m: f64,
     /// Points farther than this from the trajectory are never road (m).
     pub max_offset_m: f64,
+    /// Look for a second carriageway beyond the road edge (a median, barrier or occlusion).
+    pub reenter: bool,
+    /// A flat strip at least this wide (m) …
+    pub reentry_min_width_m: f64,
+    /// … at least this far (m) beyond the edge, with no flat strip in between (a sidewalk) …
+    pub reentry_min_separation_m: f64,
+    /// … and within this height (m) of the road is road again.
+    pub reentry_max_step_m: f64,
     /// Seed of the per-slice RANSAC generators.
     pub seed: u64,
     /// Parameters of the scan-line method (`method: "scan_lines"`).
@@ -112,6 +120,10 @@ impl Default for Params {
             max_cross_slope: 0.1,
             max_gap_m: 3.0,
             max_offset_m: 30.0,
+            reenter: true,
+            reentry_min_width_m: 3.0,
+            reentry_min_separation_m: 1.0,
+            reentry_max_step_m: 1.0,
             seed: 0,
             scan_lines: pavement_scanline::Params::default(),
         }
@@ -145,6 +157,9 @@ impl Params {
         check_range("max_cross_slope", self.max_cross_slope, 0.0, 1.0)?;
         check_range("max_gap_m", self.max_gap_m, 0.0, 50.0)?;
         check_range("max_offset_m", self.max_offset_m, 1.0, 500.0)?;
+        check_range("reentry_min_width_m", self.reentry_min_width_m, 0.1, 100.0)?;
+        check_range("reentry_min_separation_m", self.reentry_min_separation_m, 0.0, 100.0)?;
+        check_range("reentry_max_step_m", self.reentry_max_step_m, 0.0, 100.0)?;
         self.scan_lines.validate().map_err(|e| format!("scan_lines.{e}"))
     }
 }
@@ -384,46 +399,56 @@ fn slice_pavement(idx: &[usize], input: &Input<'_>, s_start: f64, slice_id: i64,
         }
     }
     let pseudo: Vec<[f64; 3]> = lowest.into_iter().flatten().collect();
-    // 2. RANSAC plane and buffer.
+    // 2. RANSAC plane: heights become residuals above the road plane (grade and cross
+    //    slope removed).
     let seed = p.seed ^ (slice_id as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
     let Some(plane) = ransac_plane(&pseudo, p.ransac_iterations, p.ransac_tolerance_m, seed) else {
         return Vec::new();
     };
-    let buffered: Vec<(usize, f64, f64)> = pts
-        .iter()
-        .map(|&(i, u, s, z)| (i, u, z - plane.at(u, s)))
-        .filter(|&(_, _, r)| r >= -p.buffer_below_m && r <= p.buffer_above_m)
-        .collect();
-    if buffered.is_empty() {
-        return Vec::new();
-    }
+    let res: Vec<(usize, f64, f64)> = pts.iter().map(|&(i, u, s, z)| (i, u, z - plane.at(u, s))).collect();
     // 3. Moving windows, centred on the trajectory (window 0 holds u ∈ [-w/2, w/2)).
     let wi = |u: f64| (u / p.window_m + 0.5).floor() as i64;
-    let w_lo = buffered.iter().map(|t| wi(t.1)).min().expect("non-empty");
-    let w_hi = buffered.iter().map(|t| wi(t.1)).max().expect("non-empty");
-    let mut windows: Vec<Window> = (w_lo..=w_hi)
-        .map(|_| Window {
+    let w_lo = res.iter().map(|t| wi(t.1)).min().expect("non-empty");
+    let w_hi = res.iter().map(|t| wi(t.1)).max().expect("non-empty");
+    let nw = (w_hi - w_lo + 1) as usize;
+    let mut members: Vec<Vec<usize>> = vec![Vec::new(); nw];
+    for (k, t) in res.iter().enumerate() {
+        members[(wi(t.1) - w_lo) as usize].push(k);
+    }
+    let mut ground_of: Vec<Vec<f64>> = vec![Vec::new(); nw];
+    for q in &pseudo {
+        ground_of[(wi(q[0]) - w_lo) as usize].push(q[2] - plane.at(q[0], q[1]));
+    }
+    // Per window: the ground is the median of its lowest points; the buffer keeps the points
+    // from `buffer_below_m` under to `buffer_above_m` over it (the paper's buffer, made
+    // local so that a far carriageway at another height is not cut away).
+    let mut windows: Vec<Window> = Vec::with_capacity(nw);
+    let mut scratch = Vec::new();
+    let mut thicknesses = Vec::new();
+    for (w, mem) in members.iter().enumerate() {
+        let mut win = Window {
             members: Vec::new(),
             level: 0.0,
             thick: 0.0,
-        })
-        .collect();
-    for (k, t) in buffered.iter().enumerate() {
-        windows[(wi(t.1) - w_lo) as usize].members.push(k);
-    }
-    let mut scratch = Vec::new();
-    let mut thicknesses = Vec::new();
-    for w in &mut windows {
-        if w.members.is_empty() {
-            continue;
+        };
+        if !ground_of[w].is_empty() {
+            let ground = quantile(&mut ground_of[w], 0.5);
+            win.members = mem
+                .iter()
+                .copied()
+                .filter(|&k| res[k].2 >= ground - p.buffer_below_m && res[k].2 <= ground + p.buffer_above_m)
+                .collect();
         }
-        scratch.clear();
-        scratch.extend(w.members.iter().map(|&k| buffered[k].2));
-        let lo = quantile(&mut scratch, 0.1);
-        let hi = quantile(&mut scratch, 0.9);
-        w.level = lo;
-        w.thick = hi - lo;
-        thicknesses.push(w.thick);
+        if !win.members.is_empty() {
+            scratch.clear();
+            scratch.extend(win.members.iter().map(|&k| res[k].2));
+            let lo = quantile(&mut scratch, 0.1);
+            let hi = quantile(&mut scratch, 0.9);
+            win.level = lo;
+            win.thick = hi - lo;
+            thicknesses.push(win.thick);
+        }
+        windows.push(win);
     }
     let thickness = if thicknesses.is_empty() {
         p.road_thickness_m
@@ -438,36 +463,95 @@ fn slice_pavement(idx: &[usize], input: &Input<'_>, s_start: f64, slice_id: i64,
             .filter(|x| !x.members.is_empty())
     };
     let max_w = (p.max_offset_m / p.window_m).ceil() as i64 + 1;
+    let in_range = |k: i64| k.abs() <= max_w && k >= w_lo - 1 && k <= w_hi + 1;
+    let flat = |w: &Window| w.thick <= thickness;
+    let near = |r: f64, lvl: f64| (r - lvl).abs() <= thickness;
+    let take = |w: &Window, lvl: f64, keep: &mut Vec<usize>| {
+        keep.extend(w.members.iter().filter(|&&m| near(res[m].2, lvl)).map(|&m| res[m].0));
+    };
     // Reference level: the window under the vehicle when it is flat, else the plane.
-    let base = get(0)
-        .filter(|w| w.thick <= thickness)
-        .map(|w| w.level)
-        .unwrap_or(0.0);
+    let base = get(0).filter(|w| flat(w)).map(|w| w.level).unwrap_or(0.0);
     for dir in [1i64, -1] {
         let mut prev = base;
         let mut gap = 0.0;
         let mut k: i64 = if dir == 1 { 0 } else { -1 };
-        while k.abs() <= max_w && k >= w_lo - 1 && k <= w_hi + 1 {
-            let Some(w) = get(k) else {
+        let mut on_road = true;
+        // Off the road: the last road window, the current flat run, and whether a flat
+        // strip was already crossed (a sidewalk: then no second carriageway is sought).
+        let mut last_road = 0i64;
+        let mut run: Vec<i64> = Vec::new();
+        let mut run_prev = 0.0;
+        let mut run_gap = 0.0;
+        let mut crossed_flat = false;
+        while in_range(k) {
+            let here = get(k);
+            if !on_road {
+                match here {
+                    Some(w) if flat(w) => {
+                        let allow = thickness + p.max_cross_slope * (run_gap + p.window_m);
+                        if run.is_empty() || (w.level - run_prev).abs() > allow {
+                            run.clear();
+                        }
+                        run.push(k);
+                        run_prev = w.level;
+                        run_gap = 0.0;
+                        let width = ((k - run[0]).abs() + 1) as f64 * p.window_m;
+                        let separation = ((run[0] - last_road).abs() - 1) as f64 * p.window_m;
+                        if width >= p.reentry_min_width_m
+                            && separation >= p.reentry_min_separation_m
+                            && !crossed_flat
+                            && (w.level - prev).abs() <= p.reentry_max_step_m
+                        {
+                            // A second carriageway beyond a median: road again.
+                            for &j in &run {
+                                let wj = get(j).expect("run windows are non-empty");
+                                take(wj, wj.level, &mut keep);
+                            }
+                            run.clear();
+                            on_road = true;
+                            prev = w.level;
+                            gap = 0.0;
+                        } else if width >= 0.8 && separation < p.reentry_min_separation_m {
+                            crossed_flat = true;
+                        }
+                    }
+                    Some(_) => {
+                        if run.len() as f64 * p.window_m >= 0.8 {
+                            crossed_flat = true;
+                        }
+                        run.clear();
+                    }
+                    None => {
+                        run_gap += p.window_m;
+                        if run_gap > p.max_gap_m {
+                            run.clear();
+                        }
+                    }
+                }
+                if !p.reenter {
+                    break;
+                }
+                k += dir;
+                continue;
+            }
+            let Some(w) = here else {
                 gap += p.window_m;
                 if gap > p.max_gap_m {
-                    break;
+                    on_road = false;
+                    last_road = k;
                 }
                 k += dir;
                 continue;
             };
             let allowance = thickness + p.max_cross_slope * (gap + p.window_m);
-            let near = |r: f64, lvl: f64| (r - lvl).abs() <= thickness;
             if (w.level - prev).abs() > allowance {
-                break; // the surface steps up (sidewalk) or down (ditch): end of road
+                // The surface steps up (sidewalk) or down (ditch): end of this road.
+                on_road = false;
+                last_road = k - dir;
+                continue; // re-examine this window off the road
             }
-            if w.thick <= thickness {
-                keep.extend(
-                    w.members
-                        .iter()
-                        .filter(|&&m| near(buffered[m].2, w.level))
-                        .map(|&m| buffered[m].0),
-                );
+            if flat(w) {
+                take(w, w.level, &mut keep);
                 prev = w.level;
                 gap = 0.0;
                 k += dir;
@@ -477,11 +561,10 @@ fn slice_pavement(idx: &[usize], input: &Input<'_>, s_start: f64, slice_id: i64,
             let mut j = k + dir;
             let mut look_gap = 0.0;
             let mut returns = false;
-            while look_gap <= p.max_gap_m && j.abs() <= max_w && j >= w_lo && j <= w_hi {
+            while look_gap <= p.max_gap_m && in_range(j) {
                 match get(j) {
-                    Some(x) if x.thick <= thickness => {
-                        let allow =
-                            thickness + p.max_cross_slope * (look_gap + p.window_m * (j - k).abs() as f64);
+                    Some(x) if flat(x) => {
+                        let allow = thickness + p.max_cross_slope * (look_gap + p.window_m * (j - k).abs() as f64);
                         returns = (x.level - prev).abs() <= allow;
                         break;
                     }
@@ -490,12 +573,7 @@ fn slice_pavement(idx: &[usize], input: &Input<'_>, s_start: f64, slice_id: i64,
                 j += dir;
             }
             if returns {
-                keep.extend(
-                    w.members
-                        .iter()
-                        .filter(|&&m| near(buffered[m].2, prev))
-                        .map(|&m| buffered[m].0),
-                );
+                take(w, prev, &mut keep);
                 gap = 0.0;
                 k += dir;
                 continue;
@@ -504,8 +582,8 @@ fn slice_pavement(idx: &[usize], input: &Input<'_>, s_start: f64, slice_id: i64,
             let high = w
                 .members
                 .iter()
-                .filter(|&&m| buffered[m].2 > prev + thickness)
-                .map(|&m| buffered[m].1);
+                .filter(|&&m| res[m].2 > prev + thickness)
+                .map(|&m| res[m].1);
             let cut = if dir == 1 {
                 high.fold(f64::INFINITY, f64::min)
             } else {
@@ -515,12 +593,14 @@ fn slice_pavement(idx: &[usize], input: &Input<'_>, s_start: f64, slice_id: i64,
                 w.members
                     .iter()
                     .filter(|&&m| {
-                        let (_, u, r) = buffered[m];
+                        let (_, u, r) = res[m];
                         near(r, prev) && if dir == 1 { u < cut } else { u > cut }
                     })
-                    .map(|&m| buffered[m].0),
+                    .map(|&m| res[m].0),
             );
-            break;
+            on_road = false;
+            last_road = k;
+            k += dir;
         }
     }
     keep

@@ -69,8 +69,16 @@ pub struct Params {
     pub factor: f64,
     /// Gaussian smoothing before thresholding (pixels; 0 = off).
     pub gaussian_sigma_px: f64,
+    /// Second, along-track detector: Gaussian widths along the trajectory (raster x) and
+    /// across it (raster y), in pixels; `along_sigma_px` 0 turns it off.
+    pub along_sigma_px: f64,
+    pub across_sigma_px: f64,
     /// Minimum normalised intensity of a foreground pixel (× asphalt background).
     pub min_contrast: f64,
+    /// Hysteresis: pixels passing these weaker limits are foreground when connected to a
+    /// pixel passing `factor` and `min_contrast` (equal values turn hysteresis off).
+    pub weak_factor: f64,
+    pub weak_min_contrast: f64,
     /// Morphological closing radius (pixels, square element; 0 = off).
     pub close_radius_px: u32,
     /// Morphological opening radius (pixels, square element; 0 = off).
@@ -94,7 +102,11 @@ impl Default for Params {
             window_radius_px: 12,
             factor: 1.27,
             gaussian_sigma_px: 1.0,
+            along_sigma_px: 4.0,
+            across_sigma_px: 0.7,
             min_contrast: 1.25,
+            weak_factor: 1.12,
+            weak_min_contrast: 1.12,
             close_radius_px: 0,
             open_radius_px: 0,
             min_component_area_m2: 0.03,
@@ -125,7 +137,11 @@ impl Params {
         }
         check_range("factor", self.factor, 0.1, 10.0)?;
         check_range("gaussian_sigma_px", self.gaussian_sigma_px, 0.0, 10.0)?;
+        check_range("along_sigma_px", self.along_sigma_px, 0.0, 20.0)?;
+        check_range("across_sigma_px", self.across_sigma_px, 0.0, 10.0)?;
         check_range("min_contrast", self.min_contrast, 0.0, 100.0)?;
+        check_range("weak_factor", self.weak_factor, 0.1, 10.0)?;
+        check_range("weak_min_contrast", self.weak_min_contrast, 0.0, 100.0)?;
         if self.close_radius_px > 10 {
             return Err(format!(
                 "close_radius_px: at most 10, got {}",
@@ -146,7 +162,7 @@ impl Params {
     /// How far (m) the decision for one pixel can depend on other pixels, excluding whole
     /// components: the chunking needs at least this much overlap.
     pub fn reach_m(&self, cell_m: f64) -> f64 {
-        let px = 3.0 * self.gaussian_sigma_px
+        let px = 3.0 * self.gaussian_sigma_px.max(self.along_sigma_px).max(self.across_sigma_px)
             + self.window_radius_px as f64
             + 2.0 * (self.close_radius_px + self.open_radius_px) as f64
             + 1.0;
@@ -161,35 +177,40 @@ impl Params {
 /// Separable Gaussian blur of the valid pixels, normalised by the blurred validity.
 /// Pixels that were NaN stay NaN.
 pub fn gaussian_smooth(img: &Raster<f32>, sigma_px: f64) -> Raster<f32> {
-    if sigma_px <= 0.0 || img.data.is_empty() {
+    gaussian_smooth_xy(img, sigma_px, sigma_px)
+}
+
+fn kernel_1d(sigma: f64) -> (i64, Vec<f32>) {
+    if sigma <= 0.0 {
+        return (0, vec![1.0]);
+    }
+    let rad = (3.0 * sigma).ceil() as i64;
+    let k = (-rad..=rad)
+        .map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp() as f32)
+        .collect();
+    (rad, k)
+}
+
+/// [`gaussian_smooth`] with different widths along x (columns) and y (rows).
+pub fn gaussian_smooth_xy(img: &Raster<f32>, sigma_x: f64, sigma_y: f64) -> Raster<f32> {
+    if (sigma_x <= 0.0 && sigma_y <= 0.0) || img.data.is_empty() {
         return img.clone();
     }
-    let rad = (3.0 * sigma_px).ceil() as i64;
-    let kernel: Vec<f32> = (-rad..=rad)
-        .map(|i| (-(i * i) as f64 / (2.0 * sigma_px * sigma_px)).exp() as f32)
-        .collect();
+    let (rx, kx) = kernel_1d(sigma_x);
+    let (ry, ky) = kernel_1d(sigma_y);
     let (w, h) = (img.width, img.height);
-    let val: Vec<f32> = img
-        .data
-        .iter()
-        .map(|v| if v.is_finite() { *v } else { 0.0 })
-        .collect();
-    let ok: Vec<f32> = img
-        .data
-        .iter()
-        .map(|v| if v.is_finite() { 1.0 } else { 0.0 })
-        .collect();
+    let val: Vec<f32> = img.data.iter().map(|v| if v.is_finite() { *v } else { 0.0 }).collect();
+    let ok: Vec<f32> = img.data.iter().map(|v| if v.is_finite() { 1.0 } else { 0.0 }).collect();
     let horiz = |src: &[f32]| -> Vec<f32> {
         let mut out = vec![0f32; w * h];
         out.par_chunks_mut(w).enumerate().for_each(|(r, line)| {
             let row = &src[r * w..(r + 1) * w];
             for (c, o) in line.iter_mut().enumerate() {
+                let lo = (c as i64 - rx).max(0) as usize;
+                let hi = ((c as i64 + rx) as usize).min(w - 1);
                 let mut acc = 0f32;
-                for (k, kv) in kernel.iter().enumerate() {
-                    let cc = c as i64 + k as i64 - rad;
-                    if cc >= 0 && (cc as usize) < w {
-                        acc += kv * row[cc as usize];
-                    }
+                for cc in lo..=hi {
+                    acc += kx[(cc as i64 - c as i64 + rx) as usize] * row[cc];
                 }
                 *o = acc;
             }
@@ -199,8 +220,8 @@ pub fn gaussian_smooth(img: &Raster<f32>, sigma_px: f64) -> Raster<f32> {
     let vert = |src: &[f32]| -> Vec<f32> {
         let mut out = vec![0f32; w * h];
         out.par_chunks_mut(w).enumerate().for_each(|(r, line)| {
-            for (k, kv) in kernel.iter().enumerate() {
-                let rr = r as i64 + k as i64 - rad;
+            for (k, kv) in ky.iter().enumerate() {
+                let rr = r as i64 + k as i64 - ry;
                 if rr < 0 || rr as usize >= h {
                     continue;
                 }
@@ -218,18 +239,9 @@ pub fn gaussian_smooth(img: &Raster<f32>, sigma_px: f64) -> Raster<f32> {
         .data
         .iter()
         .zip(sv.iter().zip(&so))
-        .map(|(orig, (v, o))| {
-            if orig.is_finite() && *o > 0.0 {
-                v / o
-            } else {
-                f32::NAN
-            }
-        })
+        .map(|(orig, (v, o))| if orig.is_finite() && *o > 0.0 { v / o } else { f32::NAN })
         .collect();
-    Raster {
-        data,
-        ..img.map(|_| 0f32)
-    }
+    Raster { data, ..img.map(|_| 0f32) }
 }
 
 // ---------------------------------------------------------------------------------------
@@ -445,7 +457,38 @@ pub struct Segmentation {
 /// Steps 1–3: smoothing, Bradley–Roth and cleanup.
 pub fn segment(img: &Raster<f32>, p: &Params) -> Segmentation {
     let smooth = gaussian_smooth(img, p.gaussian_sigma_px);
-    let mut mask = bradley_roth(&smooth, p.window_radius_px, p.factor, p.min_contrast);
+    // Worn lines are patchy along their length: averaging along the track raises their
+    // contrast above the asphalt texture, which has no preferred direction.
+    let along = (p.along_sigma_px > 0.0).then(|| gaussian_smooth_xy(img, p.along_sigma_px, p.across_sigma_px));
+    let detect = |t: f64, floor: f64| {
+        let mut m = bradley_roth(&smooth, p.window_radius_px, t, floor);
+        if let Some(a) = &along {
+            let m2 = bradley_roth(a, p.window_radius_px, t, floor);
+            for (x, y) in m.data.iter_mut().zip(&m2.data) {
+                *x |= *y;
+            }
+        }
+        m
+    };
+    let strong = detect(p.factor, p.min_contrast);
+    let mut mask = if p.weak_factor < p.factor || p.weak_min_contrast < p.min_contrast {
+        // Hysteresis: weak pixels count only in components that hold a strong one.
+        let weak = detect(p.weak_factor.min(p.factor), p.weak_min_contrast.min(p.min_contrast));
+        let (wl, wc) = label(&weak);
+        let mut seeded = vec![false; wc.len() + 1];
+        for (l, s) in wl.iter().zip(&strong.data) {
+            if *s != 0 {
+                seeded[*l as usize] = true;
+            }
+        }
+        let mut m = weak;
+        for (x, l) in m.data.iter_mut().zip(&wl) {
+            *x = u8::from(*l != 0 && seeded[*l as usize]);
+        }
+        m
+    } else {
+        strong
+    };
     if p.close_radius_px > 0 {
         mask = erode(&dilate(&mask, p.close_radius_px), p.close_radius_px);
     }
