@@ -83,6 +83,11 @@ fn semantickitti_marking_points_precision_and_recall() {
     let precision = tp as f64 / ext.max(1) as f64;
     let recall = tp as f64 / lab.max(1) as f64;
     eprintln!("semantickitti all: precision {precision:.3}, recall {recall:.3}");
+    // Measured 2026-11-22 (release): precision 0.104, recall 0.388 over the three scans.
+    // A single ring scan with per-laser gains is far from what the pipeline is built for;
+    // these floors only keep it from getting worse.
+    assert!(precision >= 0.08, "precision {precision:.3} below 0.08");
+    assert!(recall >= 0.32, "recall {recall:.3} below 0.32");
 }
 
 /// Pixel F (and per-point precision/recall against `labels.bin`) of a short simulated scene
@@ -133,6 +138,12 @@ fn sim_scores(scene: &str, length_m: f64) -> (f64, f64, f64) {
     );
     (f, p, r)
 }
+
+/// Floors a little below what was measured on this 70 m highway (seed 3): pixel F 0.619,
+/// point precision 0.822, recall 0.980 (2026-11-22).
+const PIXEL_F_FLOOR: f64 = 0.55;
+const POINT_P_FLOOR: f64 = 0.75;
+const POINT_R_FLOOR: f64 = 0.93;
 
 #[test]
 fn simulated_highway_pixel_f_and_point_scores_do_not_regress() {

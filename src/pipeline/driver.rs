@@ -365,13 +365,10 @@ fn marking_points(
             // The raster lives in trajectory coordinates (x = mileage, y = offset): lines run
             // along its rows, the along-track detector is a separable filter, and the grid
             // is global along the drive.
-            let offs = gather_f64(&c.offset);
-            // TEMP experiment switch (remove): raster in the local x/y frame.
-            let (px, py) = if std::env::var_os("ROADMARK_RASTER_XY").is_some() {
-                (gather_f64(&c.x), gather_f64(&c.y))
-            } else {
-                (gather_f64(&c.mileage), offs.clone())
-            };
+            // Only the mask lives in this frame: the marking points handed on keep their
+            // local x/y (see the end of this function), which cluster/classify/vectorize use.
+            let (px, offs) = (gather_f64(&c.mileage), gather_f64(&c.offset));
+            let py = offs.clone();
             let slice: Vec<i64> = pav
                 .iter()
                 .map(|&i| pavement::slice_of(c.mileage[i], p.pavement.slice_length_m))
