@@ -129,7 +129,10 @@ fn sim_scores(scene: &str, length_m: f64) -> (f64, f64, f64) {
     let truth = roadmark::pipeline::geojson::read_geojson(&dir.path().join("truth.geojson")).unwrap();
     let report = roadmark::eval::evaluate(&truth, &result, &roadmark::eval::EvalOptions::default()).unwrap();
     let f = report.pixel.f_score.unwrap_or(0.0);
-    let (p, r) = (tp as f64 / marks.len().max(1) as f64, tp as f64 / labelled.max(1) as f64);
+    let (p, r) = (
+        tp as f64 / marks.len().max(1) as f64,
+        tp as f64 / labelled.max(1) as f64,
+    );
     eprintln!(
         "{scene} {length_m} m: pixel F {f:.3}; marking points {} labelled {labelled}: precision {p:.3} recall {r:.3}; {} markings, {} lane lines",
         marks.len(),

@@ -11,8 +11,8 @@
 use super::extract::load_params;
 use crate::pipeline::driver::{self, STAGES};
 use crate::pipeline::{Inputs, NoProgress, PointCloud, io};
-use std::collections::HashMap;
 use anyhow::{Context, bail};
+use std::collections::HashMap;
 use std::path::PathBuf;
 use std::process::Command;
 
@@ -208,7 +208,11 @@ fn point_scores(
     marks: &PointCloud,
 ) -> anyhow::Result<(usize, usize, usize)> {
     if labels.len() != tiles.len() {
-        bail!("give one --labels file per tile ({} tiles, {} label files)", tiles.len(), labels.len());
+        bail!(
+            "give one --labels file per tile ({} tiles, {} label files)",
+            tiles.len(),
+            labels.len()
+        );
     }
     let key = |x: f64, y: f64, z: f64| {
         let q = |v: f64| (v * 1e4).round() as i64;
