@@ -646,9 +646,8 @@ mod tests {
                     (ground + 1.0 + 2.0 * jit().abs(), false)
                 } else if uu < -3.2 {
                     (ground - 0.25, false)
-                } else if uu < -3.0 {
-                    (ground + 0.2, false)
-                } else if (-2.2..-1.8).contains(&uu) && (4.0..5.0).contains(&mm) {
+                } else if uu < -3.0 || ((-2.2..-1.8).contains(&uu) && (4.0..5.0).contains(&mm)) {
+                    // The curb, and an object on the road.
                     (ground + 0.2, false)
                 } else if uu < 4.0 {
                     (ground, true)

@@ -107,7 +107,7 @@ impl Params {
             ));
         }
         check_range("power", self.power, 0.0, 8.0)?;
-        if !(2..=8).contains(&self.subcells) || self.subcells % 2 != 0 {
+        if !(2..=8).contains(&self.subcells) || !self.subcells.is_multiple_of(2) {
             return Err(format!("subcells: must be 2, 4, 6 or 8, got {}", self.subcells));
         }
         check_range("background_bin_m", self.background_bin_m, 0.1, 10.0)?;

@@ -627,7 +627,7 @@ mod tests {
         ) {
             let img = raster(w, h, |x, y| {
                 let k = (x as u64 * 31 + y as u64 * 17).wrapping_mul(seed | 1) % 97;
-                if k % 7 == 0 { f32::NAN } else { k as f32 * 0.5 }
+                if k.is_multiple_of(7) { f32::NAN } else { k as f32 * 0.5 }
             });
             let ii = IntegralImage::new(&img);
             let (c1, r1) = (c0 + dc, r0 + dr);
