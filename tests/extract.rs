@@ -83,4 +83,75 @@ fn semantickitti_marking_points_precision_and_recall() {
     let precision = tp as f64 / ext.max(1) as f64;
     let recall = tp as f64 / lab.max(1) as f64;
     eprintln!("semantickitti all: precision {precision:.3}, recall {recall:.3}");
+    // Measured 2026-11-22 (release): precision 0.104, recall 0.388 over the three scans.
+    // A single ring scan with per-laser gains is far from what the pipeline is built for;
+    // these floors only keep it from getting worse.
+    assert!(precision >= 0.08, "precision {precision:.3} below 0.08");
+    assert!(recall >= 0.32, "recall {recall:.3} below 0.32");
+}
+
+/// Pixel F (and per-point precision/recall against `labels.bin`) of a short simulated scene
+/// run through the whole pipeline and scored by the evaluator.
+fn sim_scores(scene: &str, length_m: f64) -> (f64, f64, f64) {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let opt = roadmark::sim::SimOptions {
+        scene: scene.into(),
+        seed: 3,
+        length_m: Some(length_m),
+        ..Default::default()
+    };
+    roadmark::sim::simulate(&opt, dir.path()).expect("simulate");
+    let las = dir.path().join("points.las");
+    let cloud = io::read_points(&[las.as_path()]).unwrap();
+    let labels = std::fs::read(dir.path().join("labels.bin")).unwrap();
+    let mut paint: HashMap<(i64, i64, i64), bool> = HashMap::new();
+    let o = cloud.origin;
+    for (i, b) in labels.chunks_exact(4).enumerate() {
+        let l = u32::from_le_bytes(b.try_into().unwrap());
+        let e = paint
+            .entry(key(cloud.x[i] + o[0], cloud.y[i] + o[1], cloud.z[i] + o[2]))
+            .or_default();
+        *e |= l > 0;
+    }
+    let labelled = labels
+        .chunks_exact(4)
+        .filter(|b| u32::from_le_bytes((*b).try_into().unwrap()) > 0)
+        .count();
+    let inputs = Inputs {
+        points: vec![las],
+        trajectory: dir.path().join("trajectory.csv"),
+    };
+    let (result, marks) = driver::run_collecting_marking_points(&inputs, &defaults(), &NoProgress).unwrap();
+    let mo = marks.origin;
+    let tp = (0..marks.len())
+        .filter(|&i| paint[&key(marks.x[i] + mo[0], marks.y[i] + mo[1], marks.z[i] + mo[2])])
+        .count();
+    let truth = roadmark::pipeline::geojson::read_geojson(&dir.path().join("truth.geojson")).unwrap();
+    let report = roadmark::eval::evaluate(&truth, &result, &roadmark::eval::EvalOptions::default()).unwrap();
+    let f = report.pixel.f_score.unwrap_or(0.0);
+    let (p, r) = (
+        tp as f64 / marks.len().max(1) as f64,
+        tp as f64 / labelled.max(1) as f64,
+    );
+    eprintln!(
+        "{scene} {length_m} m: pixel F {f:.3}; marking points {} labelled {labelled}: precision {p:.3} recall {r:.3}; {} markings, {} lane lines",
+        marks.len(),
+        result.markings.len(),
+        result.lane_lines.len()
+    );
+    (f, p, r)
+}
+
+/// Floors a little below what was measured on this 70 m highway (seed 3): pixel F 0.619,
+/// point precision 0.822, recall 0.980 (2026-11-22).
+const PIXEL_F_FLOOR: f64 = 0.55;
+const POINT_P_FLOOR: f64 = 0.75;
+const POINT_R_FLOOR: f64 = 0.93;
+
+#[test]
+fn simulated_highway_pixel_f_and_point_scores_do_not_regress() {
+    let (f, p, r) = sim_scores("highway", 70.0);
+    assert!(f >= PIXEL_F_FLOOR, "pixel F {f:.3} below {PIXEL_F_FLOOR}");
+    assert!(p >= POINT_P_FLOOR, "point precision {p:.3} below {POINT_P_FLOOR}");
+    assert!(r >= POINT_R_FLOOR, "point recall {r:.3} below {POINT_R_FLOOR}");
 }

@@ -10,8 +10,9 @@
 
 use super::extract::load_params;
 use crate::pipeline::driver::{self, STAGES};
-use crate::pipeline::{Inputs, NoProgress};
+use crate::pipeline::{Inputs, NoProgress, PointCloud, io};
 use anyhow::{Context, bail};
+use std::collections::HashMap;
 use std::path::PathBuf;
 use std::process::Command;
 
@@ -38,6 +39,18 @@ pub struct Args {
     /// Pipeline parameters as JSON.
     #[arg(long, value_name = "PARAMS.json")]
     pub params: Option<PathBuf>,
+    /// Per-point labels of the tiles (little-endian u32 per point, in file order; the
+    /// simulator's `labels.bin`, or SemanticKITTI `.label` files): prints the precision and
+    /// recall of the extracted marking points. A simulated drive uses its own labels.
+    #[arg(long = "labels", value_name = "FILE")]
+    pub labels: Vec<PathBuf>,
+    /// With `--labels`: the label value of painted markings (lower 16 bits, e.g. 60 for
+    /// SemanticKITTI); by default every label > 0 is paint.
+    #[arg(long, value_name = "N")]
+    pub label_class: Option<u32>,
+    /// Also write the extracted markings here (GeoJSON, for `roadmark evaluate`).
+    #[arg(long, value_name = "OUT.geojson")]
+    pub output: Option<PathBuf>,
 }
 
 /// Peak resident set size in bytes (Linux), when known.
@@ -97,12 +110,25 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             trajectory,
         }
     };
+    let mut label_files = args.labels.clone();
+    if label_files.is_empty() && args.trajectory.is_none() {
+        let sim = inputs.points[0].with_file_name("labels.bin");
+        if sim.is_file() {
+            label_files.push(sim);
+        }
+    }
     let bytes: u64 = inputs
         .points
         .iter()
         .map(|p| std::fs::metadata(p).map(|m| m.len()).unwrap_or(0))
         .sum();
-    let (ex, stats) = driver::run_with_stats(&inputs, &params, &NoProgress)?;
+    let (ex, stats, marks) = if label_files.is_empty() {
+        let (ex, stats) = driver::run_with_stats(&inputs, &params, &NoProgress)?;
+        (ex, stats, None)
+    } else {
+        let (ex, stats, m) = driver::run_collecting_with_stats(&inputs, &params, &NoProgress)?;
+        (ex, stats, Some(m))
+    };
     let threads = rayon::current_num_threads();
     println!(
         "drive: {} points ({:.0} MB on disk), {} near the trajectory, {} chunks, {} spilled, {} rayon threads",
@@ -149,11 +175,90 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         stats.pavement_points,
         stats.marking_points
     );
+    if let Some(out) = &args.output {
+        let mode = if ex.crs.is_some() {
+            crate::pipeline::geojson::CrsMode::Wgs84
+        } else {
+            crate::pipeline::geojson::CrsMode::Native
+        };
+        super::extract::write_output(out, &ex, mode)
+            .with_context(|| format!("{}: cannot write", out.display()))?;
+    }
+    if let Some(marks) = &marks {
+        let (tp, extracted, labelled) = point_scores(&inputs.points, &label_files, args.label_class, marks)?;
+        println!(
+            "marking points: extracted {extracted}, labelled {labelled}, true {tp}: precision {:.4}, recall {:.4}",
+            tp as f64 / extracted.max(1) as f64,
+            tp as f64 / labelled.max(1) as f64
+        );
+    }
     match peak_rss_bytes() {
         Some(b) => println!("peak RSS: {:.1} MB", b as f64 / 1048576.0),
         None => println!("peak RSS: unknown (no /proc/self/status)"),
     }
     Ok(())
+}
+
+/// (true positives, extracted, labelled) of the marking points against per-point labels.
+/// Points are matched by their absolute coordinates quantised to 0.1 mm.
+fn point_scores(
+    tiles: &[PathBuf],
+    labels: &[PathBuf],
+    class: Option<u32>,
+    marks: &PointCloud,
+) -> anyhow::Result<(usize, usize, usize)> {
+    if labels.len() != tiles.len() {
+        bail!(
+            "give one --labels file per tile ({} tiles, {} label files)",
+            tiles.len(),
+            labels.len()
+        );
+    }
+    let key = |x: f64, y: f64, z: f64| {
+        let q = |v: f64| (v * 1e4).round() as i64;
+        (q(x), q(y), q(z))
+    };
+    let is_paint = |l: u32| match class {
+        Some(c) => l & 0xFFFF == c,
+        None => l > 0,
+    };
+    // Per quantised position: (paint, not paint) counts (duplicates are possible).
+    let mut at: HashMap<(i64, i64, i64), (u32, u32)> = HashMap::new();
+    let mut labelled = 0;
+    for (tile, lf) in tiles.iter().zip(labels) {
+        let cloud = io::read_points(&[tile.as_path()])?;
+        let bytes = std::fs::read(lf).with_context(|| format!("{}: cannot read", lf.display()))?;
+        if bytes.len() != 4 * cloud.len() {
+            bail!(
+                "{}: {} labels for {} points in {}",
+                lf.display(),
+                bytes.len() / 4,
+                cloud.len(),
+                tile.display()
+            );
+        }
+        let o = cloud.origin;
+        for (i, b) in bytes.chunks_exact(4).enumerate() {
+            let l = u32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+            let e = at
+                .entry(key(cloud.x[i] + o[0], cloud.y[i] + o[1], cloud.z[i] + o[2]))
+                .or_default();
+            if is_paint(l) {
+                labelled += 1;
+                e.0 += 1;
+            } else {
+                e.1 += 1;
+            }
+        }
+    }
+    let o = marks.origin;
+    let tp = (0..marks.len())
+        .filter(|&i| {
+            at.get(&key(marks.x[i] + o[0], marks.y[i] + o[1], marks.z[i] + o[2]))
+                .is_some_and(|e| e.0 > 0)
+        })
+        .count();
+    Ok((tp, marks.len(), labelled))
 }
 
 struct RemoveOnDrop(PathBuf);

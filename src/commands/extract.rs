@@ -156,7 +156,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn write_output(path: &Path, ex: &Extraction, mode: CrsMode) -> anyhow::Result<()> {
+pub(crate) fn write_output(path: &Path, ex: &Extraction, mode: CrsMode) -> anyhow::Result<()> {
     geojson::write_geojson(path, ex, mode)?;
     Ok(())
 }

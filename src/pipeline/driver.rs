@@ -26,8 +26,8 @@
 use super::chunk::{ChunkPoints, Plan, Store};
 use super::error::PipelineError;
 use super::params::ValidParams;
-use super::types::{Crs, Extraction, LaneLine, Marking, PointCloud, StationIndex, Trajectory};
-use super::{Inputs, Progress, io, pavement, rasterize, threshold};
+use super::types::{Crs, Extraction, PointCloud, StationIndex, Trajectory};
+use super::{Inputs, Progress, classify, cluster, io, pavement, rasterize, threshold, vectorize};
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -128,6 +128,23 @@ pub fn run_collecting_marking_points(
     Ok((ex, ctx.collect.take().unwrap_or_default()))
 }
 
+/// [`run_collecting_marking_points`] with the run's statistics.
+pub fn run_collecting_with_stats(
+    inputs: &Inputs,
+    params: &ValidParams,
+    progress: &dyn Progress,
+) -> Result<(Extraction, RunStats, PointCloud), PipelineError> {
+    let mut ctx = Ctx {
+        params,
+        progress,
+        stats: RunStats::default(),
+        collect: Some(PointCloud::default()),
+    };
+    let ex = run_ctx(&mut ctx, inputs)?;
+    let marks = ctx.collect.take().unwrap_or_default();
+    Ok((ex, ctx.stats, marks))
+}
+
 fn run_ctx(ctx: &mut Ctx<'_>, inputs: &Inputs) -> Result<Extraction, PipelineError> {
     let t_start = Instant::now();
     let params = ctx.params;
@@ -154,7 +171,7 @@ fn run_ctx(ctx: &mut Ctx<'_>, inputs: &Inputs) -> Result<Extraction, PipelineErr
 
     // Per chunk: points → marking points of the core → complete clusters → markings.
     let mut streaming = Streaming::default();
-    let mut markings: Vec<(f64, Marking)> = Vec::new();
+    let mut pieces: Vec<vectorize::Piece> = Vec::new();
     let n_chunks = plan.count();
     ctx.stats.chunks = n_chunks;
     for (ci, k) in (plan.first..=plan.last).enumerate() {
@@ -185,23 +202,14 @@ fn run_ctx(ctx: &mut Ctx<'_>, inputs: &Inputs) -> Result<Extraction, PipelineErr
         ctx.stats.add(4, t0);
         ctx.check()?;
         ctx.progress.report("classify", base + 0.9 * step);
-        markings.extend(finish_clusters(ctx, complete, &traj, origin)?);
+        pieces.extend(finish_clusters(ctx, complete, &traj, origin)?);
         ctx.check()?;
     }
 
-    // Stable ids in mileage order, then lane lines over the whole drive.
+    // Lane lines over the whole drive, class corrections, stable ids in driving order.
     ctx.progress.report("vectorize", READ_SHARE + CHUNK_SHARE);
     let t0 = Instant::now();
-    markings.sort_by(|a, b| {
-        a.0.total_cmp(&b.0)
-            .then_with(|| a.1.outline[0][0].total_cmp(&b.1.outline[0][0]))
-            .then_with(|| a.1.outline[0][1].total_cmp(&b.1.outline[0][1]))
-    });
-    let mut markings: Vec<Marking> = markings.into_iter().map(|(_, m)| m).collect();
-    for (i, m) in markings.iter_mut().enumerate() {
-        m.id = format!("m{}", i + 1);
-    }
-    let lane_lines = link_lane_lines(&markings, &traj_abs, params);
+    let (markings, lane_lines) = vectorize::assemble(pieces, &traj_abs, &params.vectorize);
     ctx.stats.add(6, t0);
     ctx.progress.report("vectorize", 1.0);
     ctx.stats.total_seconds = t_start.elapsed().as_secs_f64();
@@ -357,6 +365,8 @@ fn marking_points(
             // The raster lives in trajectory coordinates (x = mileage, y = offset): lines run
             // along its rows, the along-track detector is a separable filter, and the grid
             // is global along the drive.
+            // Only the mask lives in this frame: the marking points handed on keep their
+            // local x/y (see the end of this function), which cluster/classify/vectorize use.
             let (px, offs) = (gather_f64(&c.mileage), gather_f64(&c.offset));
             let py = offs.clone();
             let slice: Vec<i64> = pav
@@ -532,118 +542,66 @@ fn pieces(all: &PointCloud, m: &[f64], g: &[usize], cut: bool) -> Vec<Complete> 
 // ---------------------------------------------------------------------------------------
 
 /// Partition marking points into clusters (indices into `cloud`).
-fn cluster_groups(cloud: &PointCloud, _params: &ValidParams) -> Vec<Vec<usize>> {
-    provisional::euclidean(cloud, 0.5)
+fn cluster_groups(cloud: &PointCloud, params: &ValidParams) -> Vec<Vec<usize>> {
+    cluster::run(cloud, &params.cluster)
+        .into_iter()
+        .map(|c| c.indices)
+        .collect()
 }
 
-/// Classify and vectorise complete clusters; returns (sort key = mean mileage, marking).
+/// Classify and outline the complete clusters of one chunk (pieces in absolute
+/// coordinates; lane lines and ids come once for the whole drive in `assemble`).
 fn finish_clusters(
     ctx: &mut Ctx<'_>,
     complete: Vec<Complete>,
     traj: &Trajectory,
     origin: [f64; 3],
-) -> Result<Vec<(f64, Marking)>, PipelineError> {
-    let t0 = Instant::now();
-    let out = complete
-        .par_iter()
-        .filter_map(|c| {
-            let key = c.mileage.iter().sum::<f64>() / c.mileage.len() as f64;
-            provisional::marking(&c.points, traj, origin).map(|m| (key, m))
-        })
-        .collect();
-    ctx.stats.add(5, t0);
-    Ok(out)
-}
-
-/// Lane lines over all markings of the drive.
-fn link_lane_lines(_markings: &[Marking], _traj: &Trajectory, _params: &ValidParams) -> Vec<LaneLine> {
-    Vec::new()
-}
-
-/// Stand-ins until the vector stages land: Euclidean clustering and a rectangle per
-/// cluster. Replaced by `cluster`, `classify` and `vectorize`.
-mod provisional {
-    use super::super::types::{Marking, MarkingClass, PointCloud, Trajectory};
-    use geo::{Area, MinimumRotatedRect, MultiPoint, Point};
-
-    pub fn euclidean(cloud: &PointCloud, radius: f64) -> Vec<Vec<usize>> {
-        let n = cloud.len();
-        if n == 0 {
-            return Vec::new();
-        }
-        let pts: Vec<[f64; 2]> = (0..n).map(|i| [cloud.x[i], cloud.y[i]]).collect();
-        let tree = kiddo::ImmutableKdTree::<f64, 2>::new_from_slice(&pts).expect("finite points");
-        let mut label = vec![usize::MAX; n];
-        let mut groups = Vec::new();
-        for s in 0..n {
-            if label[s] != usize::MAX {
-                continue;
-            }
-            let id = groups.len();
-            label[s] = id;
-            let mut g = vec![s];
-            let mut k = 0;
-            while k < g.len() {
-                let p = pts[g[k]];
-                for nb in tree
-                    .query(&p)
-                    .within::<kiddo::SquaredEuclidean<f64>>(radius * radius)
-                    .unsorted()
-                    .execute()
-                {
-                    let j = nb.item as usize;
-                    if label[j] == usize::MAX {
-                        label[j] = id;
-                        g.push(j);
-                    }
-                }
-                k += 1;
-            }
-            g.sort_unstable();
-            groups.push(g);
-        }
-        groups
+) -> Result<Vec<vectorize::Piece>, PipelineError> {
+    if complete.is_empty() {
+        return Ok(Vec::new());
     }
+    let t0 = Instant::now();
+    let p = ctx.params;
+    // One cloud of all complete clusters, each a cluster of consecutive indices.
+    let mut cloud = PointCloud::with_origin(origin);
+    cloud.gps_time = complete[0].points.gps_time.as_ref().map(|_| Vec::new());
+    let mut clusters = Vec::with_capacity(complete.len());
+    for c in &complete {
+        let start = cloud.len();
+        cloud.extend_from(&c.points);
+        clusters.push(as_cluster(&cloud, start..cloud.len()));
+    }
+    drop(complete);
+    // The classifier's reference line only needs the trajectory around these clusters.
+    let candidates = classify::run(&cloud, &clusters, traj, &p.classify);
+    ctx.stats.add(5, t0);
+    let t0 = Instant::now();
+    let pieces = vectorize::outlines(&cloud, &candidates, &p.vectorize);
+    ctx.stats.add(6, t0);
+    Ok(pieces)
+}
 
-    pub fn marking(c: &PointCloud, _traj: &Trajectory, origin: [f64; 3]) -> Option<Marking> {
-        if c.len() < 5 {
-            return None;
+/// A [`cluster::Cluster`] over a range of `cloud`'s points.
+fn as_cluster(cloud: &PointCloud, range: std::ops::Range<usize>) -> cluster::Cluster {
+    let n = range.len().max(1) as f64;
+    let (mut sx, mut sy, mut si) = (0.0, 0.0, 0.0f64);
+    let mut bounds = [[f64::INFINITY; 2], [f64::NEG_INFINITY; 2]];
+    for i in range.clone() {
+        let p = [cloud.x[i], cloud.y[i]];
+        sx += p[0];
+        sy += p[1];
+        si += cloud.intensity[i] as f64;
+        for k in 0..2 {
+            bounds[0][k] = bounds[0][k].min(p[k]);
+            bounds[1][k] = bounds[1][k].max(p[k]);
         }
-        let mp: MultiPoint<f64> = (0..c.len())
-            .map(|i| Point::new(c.x[i] + origin[0], c.y[i] + origin[1]))
-            .collect();
-        let rect = mp.minimum_rotated_rect()?;
-        let ring: Vec<[f64; 2]> = rect.exterior().points().map(|p| [p.x(), p.y()]).collect();
-        let ring = ring[..ring.len().saturating_sub(1)].to_vec();
-        if ring.len() < 4 {
-            return None;
-        }
-        let e1 = (ring[1][0] - ring[0][0]).hypot(ring[1][1] - ring[0][1]);
-        let e2 = (ring[2][0] - ring[1][0]).hypot(ring[2][1] - ring[1][1]);
-        let (a, b, (dx, dy)) = if e1 >= e2 {
-            (e1, e2, (ring[1][0] - ring[0][0], ring[1][1] - ring[0][1]))
-        } else {
-            (e2, e1, (ring[2][0] - ring[1][0], ring[2][1] - ring[1][1]))
-        };
-        let _ = rect.unsigned_area();
-        let class = if a > 7.0 && a / b.max(0.01) > 20.0 {
-            MarkingClass::SolidLine
-        } else if (1.0..=7.0).contains(&a) && b < 0.4 {
-            MarkingClass::DashedLine
-        } else {
-            MarkingClass::Unknown
-        };
-        let heading = (dx.atan2(dy).to_degrees() + 360.0) % 180.0;
-        Some(Marking {
-            id: String::new(),
-            class,
-            outline: ring,
-            confidence: 0.5,
-            length_m: a,
-            width_m: b,
-            heading_deg: heading,
-            point_count: c.len(),
-        })
+    }
+    cluster::Cluster {
+        indices: range.collect(),
+        centroid: [sx / n, sy / n],
+        bounds,
+        mean_intensity: (si / n) as f32,
+        split: false,
     }
 }
 
