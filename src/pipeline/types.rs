@@ -348,14 +348,18 @@ pub struct StationIndex<'a> {
     seg_len: Vec<f64>,
     /// Per block of [`BLOCK`] samples: squared half clearance (see the type docs).
     half_clear2: Vec<f64>,
+    /// Samples per metre of track.
+    per_m: f64,
 }
 
 /// Samples per clearance block of [`StationIndex`].
 const BLOCK: usize = 32;
 /// Along-track distance beyond which a part of the track counts as "far" (m).
-const FAR_ARC_M: f64 = 60.0;
+const FAR_ARC_M: f64 = 100.0;
 /// Samples checked on each side of a walk's local minimum.
 const WALK_WINDOW: usize = 6;
+/// Pose jitter the walk tolerates (m).
+const WALK_JITTER_M: f64 = 0.02;
 /// Walks longer than this give up and ask the kd-tree.
 const WALK_MAX_STEPS: usize = 256;
 
@@ -382,10 +386,14 @@ impl<'a> StationIndex<'a> {
         seg_of.push(traj.poses.len() - 2);
         arc.push(traj.length_m());
         let tree = kiddo::ImmutableKdTree::new_from_slice(&pts).expect("finite trajectory samples");
-        let dir = (0..traj.poses.len() - 1).map(|i| traj.segment_direction(i)).collect();
+        let dir = (0..traj.poses.len() - 1)
+            .map(|i| traj.segment_direction(i))
+            .collect();
         let seg_len = traj.cum_m.windows(2).map(|w| w[1] - w[0]).collect();
         let half_clear2 = block_clearance(&tree, &pts, &arc);
+        let per_m = pts.len() as f64 / traj.length_m().max(1e-3);
         Self {
+            per_m,
             traj,
             tree,
             seg_of,
@@ -457,7 +465,11 @@ impl<'a> StationIndex<'a> {
                     }
                 }
             }
-            let (lo, hi) = (s.saturating_sub(WALK_WINDOW), (s + WALK_WINDOW).min(n - 1));
+            // Jitter of the poses makes shallow local minima over a length that grows
+            // with the distance: sqrt(8 d jitter).
+            let w = ((8.0 * best.sqrt() * WALK_JITTER_M).sqrt() * self.per_m).ceil() as usize;
+            let w = w.max(WALK_WINDOW);
+            let (lo, hi) = (s.saturating_sub(w), (s + w).min(n - 1));
             let mut bs = s;
             for j in lo..=hi {
                 let d = self.d2(j, x, y);
@@ -479,7 +491,7 @@ impl<'a> StationIndex<'a> {
         let seg = self.seg_of[s];
         let n = self.dir.len();
         let (lo, hi) = (seg.saturating_sub(1), (seg + 1).min(n - 1));
-        let mut best = (f64::INFINITY, 0usize, 0.0, 0.0, 0.0, 0.0, 0.0);
+        let mut best: (f64, usize, f64, f64, f64, f64, f64) = (f64::INFINITY, 0, 0.0, 0.0, 0.0, 0.0, 0.0);
         for i in lo..=hi {
             let a = &self.traj.poses[i];
             let d = self.dir[i];
@@ -489,7 +501,14 @@ impl<'a> StationIndex<'a> {
             let cl = along.clamp(0.0, len);
             let (px, py) = (a.x + cl * d[0], a.y + cl * d[1]);
             let dist2 = (x - px) * (x - px) + (y - py) * (y - py);
-            if dist2 < best.0 {
+            // Squared distances order like `locate_in`'s `hypot` ones except at near ties
+            // (a point on the bisector of two segments): those are decided like there.
+            let closer = if best.0.is_infinite() || (dist2 - best.0).abs() > 1e-12 * best.0 {
+                dist2 < best.0
+            } else {
+                (x - px).hypot(y - py) < best.5.hypot(best.6)
+            };
+            if closer {
                 let side = d[0] * ry - d[1] * rx;
                 best = (dist2, i, along, cl, side, x - px, y - py);
             }
@@ -521,11 +540,11 @@ impl<'a> StationIndex<'a> {
 /// along the track away from the whole block (infinite when there is none within a few
 /// hundred metres; points that far are never near the track anyway, and fall back).
 fn block_clearance(tree: &kiddo::ImmutableKdTree<f64, 2>, pts: &[[f64; 2]], arc: &[f64]) -> Vec<f64> {
-    const SEARCH_M: f64 = 200.0;
+    const SEARCH_M: f64 = 250.0;
     (0..pts.len().div_ceil(BLOCK))
         .map(|b| {
             let (lo, hi) = (b * BLOCK, ((b + 1) * BLOCK).min(pts.len()));
-            let c = pts[lo];
+            let c = pts[(lo + hi) / 2];
             let radius = pts[lo..hi]
                 .iter()
                 .map(|q| (q[0] - c[0]).hypot(q[1] - c[1]))
@@ -747,6 +766,87 @@ mod tests {
         );
         let (p, _) = t.at_mileage(12.0);
         assert!((p[0] - 10.0).abs() < 1e-12 && (p[1] - 2.0).abs() < 1e-12);
+    }
+
+    /// A jittered S-bend sampled at 100 Hz, and points swept across it in scan lines (the
+    /// order of acquisition), some of them far away.
+    fn jittered_drive() -> (Trajectory, Vec<[f64; 2]>) {
+        let mut rng = 12345u64;
+        let mut noise = move || {
+            rng = rng
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((rng >> 11) as f64 / (1u64 << 53) as f64) - 0.5
+        };
+        let mut poses = Vec::new();
+        let (mut x, mut y, mut h) = (0.0f64, 0.0f64, 0.0f64);
+        for i in 0..6000 {
+            let curv = 0.02 * (i as f64 / 1500.0).sin();
+            h += curv * 0.15;
+            x += 0.15 * h.cos();
+            y += 0.15 * h.sin();
+            poses.push(pose(i as f64 * 0.01, x + 0.01 * noise(), y + 0.01 * noise()));
+        }
+        let t = Trajectory::new(poses).unwrap();
+        let mut pts = Vec::new();
+        for line in 0..3000 {
+            let (c, d) = t.at_mileage(line as f64 * 0.3);
+            for k in 0..60 {
+                let r = (k as f64 - 30.0) * 1.5 + noise();
+                let along = noise() * 0.2;
+                pts.push([c[0] - d[1] * r + d[0] * along, c[1] + d[0] * r + d[1] * along]);
+            }
+            // Now and then a point far out (a building, the sky).
+            pts.push([c[0] + 400.0 * noise(), c[1] + 400.0 * noise()]);
+        }
+        (t, pts)
+    }
+
+    #[test]
+    fn walking_from_the_previous_point_matches_the_kd_tree() {
+        let (t, pts) = jittered_drive();
+        let idx = StationIndex::new(&t, 1.0);
+        let mut hint = usize::MAX;
+        let mut same = 0;
+        let check = |k: usize, walked: Station, tree: Station| {
+            // Where they differ, the two stations are equally near (a near tie).
+            assert!(
+                (walked.offset_m.abs() - tree.offset_m.abs()).abs() < 1e-3,
+                "point {k}: {walked:?} {tree:?}"
+            );
+            assert!((walked.mileage_m - tree.mileage_m).abs() < 2.0, "point {k}");
+            walked == tree
+        };
+        for (k, p) in pts.iter().enumerate() {
+            let walked = idx.locate_near(p[0], p[1], &mut hint);
+            same += check(k, walked, idx.locate(p[0], p[1])) as usize;
+        }
+        assert!(same as f64 >= 0.999 * pts.len() as f64, "{same} of {}", pts.len());
+        // Any hint gives (almost always) the kd-tree's answer.
+        let mut same = 0;
+        let mut n = 0;
+        for (k, p) in pts.iter().enumerate().step_by(97) {
+            let mut far_hint = (k * 7919) % 6000;
+            let walked = idx.locate_near(p[0], p[1], &mut far_hint);
+            same += check(k, walked, idx.locate(p[0], p[1])) as usize;
+            n += 1;
+        }
+        assert!(same as f64 >= 0.99 * n as f64, "{same} of {n}");
+    }
+
+    #[test]
+    fn station_index_agrees_with_the_exact_search_on_a_jittered_track() {
+        let (t, pts) = jittered_drive();
+        let idx = StationIndex::new(&t, 1.0);
+        let mut worst: f64 = 0.0;
+        for p in pts.iter().step_by(7) {
+            let fast = idx.locate(p[0], p[1]);
+            let slow = t.locate(p[0], p[1]);
+            if fast.offset_m.abs() < 30.0 {
+                worst = worst.max((fast.offset_m.abs() - slow.offset_m.abs()).abs());
+            }
+        }
+        assert!(worst < 1e-3, "offset error {worst}");
     }
 
     #[test]
