@@ -467,8 +467,7 @@ impl<'a> StationIndex<'a> {
             }
             // Jitter of the poses makes shallow local minima over a length that grows
             // with the distance: sqrt(8 d jitter).
-            // (`as usize + 1` rounds up without a libm call.)
-            let w = ((8.0 * best.sqrt() * WALK_JITTER_M).sqrt() * self.per_m) as usize + 1;
+            let w = ((8.0 * best.sqrt() * WALK_JITTER_M).sqrt() * self.per_m).ceil() as usize;
             let w = w.max(WALK_WINDOW);
             let (lo, hi) = (s.saturating_sub(w), (s + w).min(n - 1));
             let mut bs = s;
