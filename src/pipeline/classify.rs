@@ -261,13 +261,7 @@ pub fn assess(
 }
 
 /// Features of one group of points; class left `Unknown` (rules come later).
-fn describe(
-    xy: &[[f64; 2]],
-    intensity: &[f32],
-    mut idx: Vec<usize>,
-    refl: &RefLine,
-    p: &Params,
-) -> Candidate {
+fn describe(xy: &[[f64; 2]], intensity: &[f32], mut idx: Vec<usize>, refl: &RefLine, p: &Params) -> Candidate {
     idx.sort_unstable();
     let pts: Vec<[f64; 2]> = idx.iter().map(|&i| xy[i]).collect();
     let bar = BarShape::of(&pts);
@@ -278,10 +272,8 @@ fn describe(
     let mean_intensity = if idx.is_empty() {
         0.0
     } else {
-        (idx.iter()
-            .map(|&i| intensity.get(i).copied().unwrap_or(0.0) as f64)
-            .sum::<f64>()
-            / idx.len() as f64) as f32
+        (idx.iter().map(|&i| intensity.get(i).copied().unwrap_or(0.0) as f64).sum::<f64>() / idx.len() as f64)
+            as f32
     };
     let shape = Shape {
         center,
@@ -372,21 +364,13 @@ fn line_geometry(pts: &[[f64; 2]], refl: &RefLine, p: &Params) -> Option<LineGeo
     }
     let angle = slope.abs().atan().to_degrees();
     // Local angles too: a piece bending across the road is not a lane line.
-    if angle > p.line_max_angle_deg
-        || ks
-            .iter()
-            .any(|&s| fit(s).1.abs().atan().to_degrees() > p.line_max_angle_deg + 10.0)
-    {
+    if angle > p.line_max_angle_deg || ks.iter().any(|&s| fit(s).1.abs().atan().to_degrees() > p.line_max_angle_deg + 10.0) {
         return None;
     }
     // Ends: the first/last points, ignoring a lone stray beyond a slice gap.
     let first = (0..ns).find(|&k| slices[k].len() >= 2).unwrap_or(0);
     let last = (0..ns).rev().find(|&k| slices[k].len() >= 2).unwrap_or(ns - 1);
-    let s0 = so
-        .iter()
-        .map(|q| q[0])
-        .find(|&s| s >= s_lo + first as f64 * ds)
-        .unwrap_or(s_lo);
+    let s0 = so.iter().map(|q| q[0]).find(|&s| s >= s_lo + first as f64 * ds).unwrap_or(s_lo);
     let s1 = so
         .iter()
         .rev()
@@ -430,11 +414,7 @@ struct End {
 fn piece_end(c: &Candidate, p: &Params) -> Option<End> {
     if let Some(l) = &c.line {
         let (a, b) = (l.stations[0], l.stations[l.stations.len() - 1]);
-        let slope = if b[0] - a[0] > 1e-6 {
-            (b[1] - a[1]) / (b[0] - a[0])
-        } else {
-            0.0
-        };
+        let slope = if b[0] - a[0] > 1e-6 { (b[1] - a[1]) / (b[0] - a[0]) } else { 0.0 };
         return Some(End {
             s0: a[0],
             s1: b[0],
@@ -461,13 +441,7 @@ fn piece_end(c: &Candidate, p: &Params) -> Option<End> {
 }
 
 /// Merge broken pieces of one line (mutual best successor within `join_gap_m`).
-fn rejoin(
-    feats: Vec<Candidate>,
-    xy: &[[f64; 2]],
-    intensity: &[f32],
-    refl: &RefLine,
-    p: &Params,
-) -> Vec<Candidate> {
+fn rejoin(feats: Vec<Candidate>, xy: &[[f64; 2]], intensity: &[f32], refl: &RefLine, p: &Params) -> Vec<Candidate> {
     if p.join_gap_m <= 0.0 {
         return feats;
     }
@@ -487,9 +461,7 @@ fn rejoin(
         let dev = (eb.o0 - pred).abs();
         let wmax = ea.width.max(eb.width).max(0.05);
         let tol = 0.5 * wmax + 0.03;
-        if dev > tol
-            || ea.width.min(eb.width) < 0.4 * wmax && feats[a].line.is_some() && feats[b].line.is_some()
-        {
+        if dev > tol || ea.width.min(eb.width) < 0.4 * wmax && feats[a].line.is_some() && feats[b].line.is_some() {
             return None;
         }
         Some(dev / tol + gap.max(0.0) / p.join_gap_m)
@@ -542,8 +514,7 @@ fn rejoin(
         groups.entry(r).or_default().push(i);
     }
     let mut slots: Vec<Option<Candidate>> = feats.into_iter().map(Some).collect();
-    let (single, multi): (Vec<Vec<usize>>, Vec<Vec<usize>>) =
-        groups.into_values().partition(|g| g.len() == 1);
+    let (single, multi): (Vec<Vec<usize>>, Vec<Vec<usize>>) = groups.into_values().partition(|g| g.len() == 1);
     let mut out: Vec<Candidate> = single
         .into_iter()
         .map(|g| slots[g[0]].take().expect("each candidate once"))
@@ -616,11 +587,7 @@ fn rule(mut c: Candidate, p: &Params) -> (Candidate, Option<DropReason>) {
     }
     let bar = s.fill_ratio >= 0.65 && aspect >= 2.5;
     let ang = s.angle_to_trajectory_deg;
-    if bar
-        && ang >= 60.0
-        && s.width_m >= p.stop_min_width_m
-        && s.width_m <= p.stop_max_width_m
-        && s.length_m >= 1.5
+    if bar && ang >= 60.0 && s.width_m >= p.stop_min_width_m && s.width_m <= p.stop_max_width_m && s.length_m >= 1.5
     {
         c.class = MarkingClass::StopLine;
         c.confidence = 0.8 * inside(s.width_m, p.stop_min_width_m, p.stop_max_width_m);

@@ -714,11 +714,13 @@ fn bar_split_at(
             }
         }
         let one_side = same_side as f64 >= 0.95 * part.len() as f64;
-        let perpendicular =
-            phi >= 60.0 && pa - ba >= 0.3 && bb - pb >= 0.3 && (bb - ba) >= 2.5 * (pb - pa) && one_side;
+        let perpendicular = phi >= 60.0
+            && pa - ba >= 0.3
+            && bb - pb >= 0.3
+            && (bb - ba) >= 2.5 * (pb - pa)
+            && one_side;
         // A filled stripe touching the bar at an angle (chevrons on an edge line).
-        let diagonal =
-            phi > 20.0 && phi < 70.0 && one_side && shape.length() >= 1.0 && filled_bar(&pxy).is_some();
+        let diagonal = phi > 20.0 && phi < 70.0 && one_side && shape.length() >= 1.0 && filled_bar(&pxy).is_some();
         // A long line takes nothing with it: whatever touches it is another object.
         if long || parallel || perpendicular || diagonal {
             out.push(part);

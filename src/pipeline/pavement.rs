@@ -158,12 +158,7 @@ impl Params {
         check_range("max_gap_m", self.max_gap_m, 0.0, 50.0)?;
         check_range("max_offset_m", self.max_offset_m, 1.0, 500.0)?;
         check_range("reentry_min_width_m", self.reentry_min_width_m, 0.1, 100.0)?;
-        check_range(
-            "reentry_min_separation_m",
-            self.reentry_min_separation_m,
-            0.0,
-            100.0,
-        )?;
+        check_range("reentry_min_separation_m", self.reentry_min_separation_m, 0.0, 100.0)?;
         check_range("reentry_max_step_m", self.reentry_max_step_m, 0.0, 100.0)?;
         self.scan_lines.validate().map_err(|e| format!("scan_lines.{e}"))
     }
@@ -410,10 +405,7 @@ fn slice_pavement(idx: &[usize], input: &Input<'_>, s_start: f64, slice_id: i64,
     let Some(plane) = ransac_plane(&pseudo, p.ransac_iterations, p.ransac_tolerance_m, seed) else {
         return Vec::new();
     };
-    let res: Vec<(usize, f64, f64)> = pts
-        .iter()
-        .map(|&(i, u, s, z)| (i, u, z - plane.at(u, s)))
-        .collect();
+    let res: Vec<(usize, f64, f64)> = pts.iter().map(|&(i, u, s, z)| (i, u, z - plane.at(u, s))).collect();
     // 3. Moving windows, centred on the trajectory (window 0 holds u ∈ [-w/2, w/2)).
     let wi = |u: f64| (u / p.window_m + 0.5).floor() as i64;
     let w_lo = res.iter().map(|t| wi(t.1)).min().expect("non-empty");
@@ -475,12 +467,7 @@ fn slice_pavement(idx: &[usize], input: &Input<'_>, s_start: f64, slice_id: i64,
     let flat = |w: &Window| w.thick <= thickness;
     let near = |r: f64, lvl: f64| (r - lvl).abs() <= thickness;
     let take = |w: &Window, lvl: f64, keep: &mut Vec<usize>| {
-        keep.extend(
-            w.members
-                .iter()
-                .filter(|&&m| near(res[m].2, lvl))
-                .map(|&m| res[m].0),
-        );
+        keep.extend(w.members.iter().filter(|&&m| near(res[m].2, lvl)).map(|&m| res[m].0));
     };
     // Reference level: the window under the vehicle when it is flat, else the plane.
     let base = get(0).filter(|w| flat(w)).map(|w| w.level).unwrap_or(0.0);
@@ -577,8 +564,7 @@ fn slice_pavement(idx: &[usize], input: &Input<'_>, s_start: f64, slice_id: i64,
             while look_gap <= p.max_gap_m && in_range(j) {
                 match get(j) {
                     Some(x) if flat(x) => {
-                        let allow =
-                            thickness + p.max_cross_slope * (look_gap + p.window_m * (j - k).abs() as f64);
+                        let allow = thickness + p.max_cross_slope * (look_gap + p.window_m * (j - k).abs() as f64);
                         returns = (x.level - prev).abs() <= allow;
                         break;
                     }

@@ -162,11 +162,7 @@ impl Params {
     /// How far (m) the decision for one pixel can depend on other pixels, excluding whole
     /// components: the chunking needs at least this much overlap.
     pub fn reach_m(&self, cell_m: f64) -> f64 {
-        let px = 3.0
-            * self
-                .gaussian_sigma_px
-                .max(self.along_sigma_px)
-                .max(self.across_sigma_px)
+        let px = 3.0 * self.gaussian_sigma_px.max(self.along_sigma_px).max(self.across_sigma_px)
             + self.window_radius_px as f64
             + 2.0 * (self.close_radius_px + self.open_radius_px) as f64
             + 1.0;
@@ -203,16 +199,8 @@ pub fn gaussian_smooth_xy(img: &Raster<f32>, sigma_x: f64, sigma_y: f64) -> Rast
     let (rx, kx) = kernel_1d(sigma_x);
     let (ry, ky) = kernel_1d(sigma_y);
     let (w, h) = (img.width, img.height);
-    let val: Vec<f32> = img
-        .data
-        .iter()
-        .map(|v| if v.is_finite() { *v } else { 0.0 })
-        .collect();
-    let ok: Vec<f32> = img
-        .data
-        .iter()
-        .map(|v| if v.is_finite() { 1.0 } else { 0.0 })
-        .collect();
+    let val: Vec<f32> = img.data.iter().map(|v| if v.is_finite() { *v } else { 0.0 }).collect();
+    let ok: Vec<f32> = img.data.iter().map(|v| if v.is_finite() { 1.0 } else { 0.0 }).collect();
     let horiz = |src: &[f32]| -> Vec<f32> {
         let mut out = vec![0f32; w * h];
         out.par_chunks_mut(w).enumerate().for_each(|(r, line)| {
@@ -251,18 +239,9 @@ pub fn gaussian_smooth_xy(img: &Raster<f32>, sigma_x: f64, sigma_y: f64) -> Rast
         .data
         .iter()
         .zip(sv.iter().zip(&so))
-        .map(|(orig, (v, o))| {
-            if orig.is_finite() && *o > 0.0 {
-                v / o
-            } else {
-                f32::NAN
-            }
-        })
+        .map(|(orig, (v, o))| if orig.is_finite() && *o > 0.0 { v / o } else { f32::NAN })
         .collect();
-    Raster {
-        data,
-        ..img.map(|_| 0f32)
-    }
+    Raster { data, ..img.map(|_| 0f32) }
 }
 
 // ---------------------------------------------------------------------------------------
@@ -480,8 +459,7 @@ pub fn segment(img: &Raster<f32>, p: &Params) -> Segmentation {
     let smooth = gaussian_smooth(img, p.gaussian_sigma_px);
     // Worn lines are patchy along their length: averaging along the track raises their
     // contrast above the asphalt texture, which has no preferred direction.
-    let along =
-        (p.along_sigma_px > 0.0).then(|| gaussian_smooth_xy(img, p.along_sigma_px, p.across_sigma_px));
+    let along = (p.along_sigma_px > 0.0).then(|| gaussian_smooth_xy(img, p.along_sigma_px, p.across_sigma_px));
     let detect = |t: f64, floor: f64| {
         let mut m = bradley_roth(&smooth, p.window_radius_px, t, floor);
         if let Some(a) = &along {
@@ -495,10 +473,7 @@ pub fn segment(img: &Raster<f32>, p: &Params) -> Segmentation {
     let strong = detect(p.factor, p.min_contrast);
     let mut mask = if p.weak_factor < p.factor || p.weak_min_contrast < p.min_contrast {
         // Hysteresis: weak pixels count only in components that hold a strong one.
-        let weak = detect(
-            p.weak_factor.min(p.factor),
-            p.weak_min_contrast.min(p.min_contrast),
-        );
+        let weak = detect(p.weak_factor.min(p.factor), p.weak_min_contrast.min(p.min_contrast));
         let (wl, wc) = label(&weak);
         let mut seeded = vec![false; wc.len() + 1];
         for (l, s) in wl.iter().zip(&strong.data) {
