@@ -15,11 +15,12 @@
 //! chunking. [`required_overlap_m`] computes the reach from the stage parameters.
 //!
 //! **Parameters** ([`Params`]): `length_m` 100, `overlap_m` 0 (= automatic: 1.5 × the
-//! stages' reach, at least 10 m, rounded up to whole slices), `memory_budget_mb` 512.
+//! stages' reach, at least 10 m, rounded up to whole slices), `memory_budget_mb` 1024.
 //!
 //! **Complexity.** O(n) copies and at most one write and one read of each point.
 
 use super::error::PipelineError;
+use super::types::PointCloud;
 use serde::{Deserialize, Serialize};
 use std::fs::{File, OpenOptions};
 use std::io::{BufReader, BufWriter, Read, Write};
@@ -42,7 +43,7 @@ impl Default for Params {
         Self {
             length_m: 100.0,
             overlap_m: 0.0,
-            memory_budget_mb: 512,
+            memory_budget_mb: 1024,
         }
     }
 }
@@ -123,8 +124,8 @@ impl Plan {
 
     /// Chunks whose extended range holds mileage m (clamped to the plan).
     pub fn chunks_of(&self, m: f64) -> std::ops::RangeInclusive<i64> {
-        let lo = ((m - self.overlap_m) / self.length_m).floor() as i64;
-        let hi = ((m + self.overlap_m) / self.length_m).floor() as i64;
+        let lo = floor_i64((m - self.overlap_m) / self.length_m);
+        let hi = floor_i64((m + self.overlap_m) / self.length_m);
         // Floating-point edges: keep only chunks whose extended range really holds m.
         let lo = if m < (lo + 1) as f64 * self.length_m + self.overlap_m {
             lo
@@ -138,6 +139,13 @@ impl Plan {
         };
         lo.max(self.first)..=hi.min(self.last)
     }
+}
+
+/// `v.floor() as i64` without the libm call (`floor` is not inlined without SSE 4.1).
+#[inline]
+fn floor_i64(v: f64) -> i64 {
+    let t = v as i64;
+    if (t as f64) > v { t - 1 } else { t }
 }
 
 /// Points of one chunk: coordinates relative to the job origin, plus their station.
@@ -262,6 +270,11 @@ pub struct Store {
     spilled: Vec<bool>,
     buffered_points: usize,
     budget_points: usize,
+    /// Batch counter at each buffer's last append (spilling starts with the stalest).
+    touched: Vec<u64>,
+    batches: u64,
+    /// Scratch: per chunk, the indices of the current batch it receives.
+    scratch: Vec<Vec<u32>>,
     dir: Option<PathBuf>,
     /// Points written to disk so far (for the report).
     pub spilled_points: u64,
@@ -282,6 +295,9 @@ impl Store {
             spilled: vec![false; plan.count()],
             buffered_points: 0,
             budget_points: (memory_budget_mb as usize * 1024 * 1024 / POINT_BYTES).max(1),
+            touched: vec![0; plan.count()],
+            batches: 0,
+            scratch: vec![Vec::new(); plan.count()],
             dir: None,
             spilled_points: 0,
         }
@@ -301,7 +317,62 @@ impl Store {
         }
     }
 
-    /// Spill when over budget (call between batches).
+    /// Append the points of a located batch: point i (job-local coordinates in `c`) at
+    /// (`mileage[i]`, `offset[i]`) is kept when `keep(mileage, offset)`; returns how many
+    /// were kept. Column by column per chunk (much faster than point by point), in batch
+    /// order, so every chunk still holds its points in order of arrival.
+    pub fn push_cloud(
+        &mut self,
+        c: &PointCloud,
+        mileage: &[f64],
+        offset: &[f64],
+        keep: impl Fn(f64, f64) -> bool,
+    ) -> u64 {
+        self.batches += 1;
+        let first = self.plan.first;
+        let mut touched: Vec<usize> = Vec::new();
+        let mut kept = 0u64;
+        for (i, (&m, &o)) in mileage.iter().zip(offset).enumerate() {
+            if !keep(m, o) {
+                continue;
+            }
+            kept += 1;
+            for k in self.plan.chunks_of(m) {
+                let b = (k - first) as usize;
+                let list = &mut self.scratch[b];
+                if list.is_empty() {
+                    touched.push(b);
+                }
+                list.push(i as u32);
+            }
+        }
+        let times = c.gps_time.as_deref();
+        for b in touched {
+            let idx = std::mem::take(&mut self.scratch[b]);
+            let buf = &mut self.buffers[b];
+            buf.x.extend(idx.iter().map(|&i| c.x[i as usize]));
+            buf.y.extend(idx.iter().map(|&i| c.y[i as usize]));
+            buf.z.extend(idx.iter().map(|&i| c.z[i as usize]));
+            buf.intensity.extend(idx.iter().map(|&i| c.intensity[i as usize]));
+            match times {
+                Some(t) => buf.gps_time.extend(idx.iter().map(|&i| t[i as usize])),
+                None => buf.gps_time.extend(idx.iter().map(|_| f64::NAN)),
+            }
+            buf.scanner.extend(idx.iter().map(|&i| c.scanner[i as usize]));
+            buf.mileage.extend(idx.iter().map(|&i| mileage[i as usize]));
+            buf.offset.extend(idx.iter().map(|&i| offset[i as usize]));
+            self.buffered_points += idx.len();
+            self.touched[b] = self.batches;
+            let mut idx = idx;
+            idx.clear();
+            self.scratch[b] = idx;
+        }
+        kept
+    }
+
+    /// Spill when over budget (call between batches): the buffers appended to longest ago
+    /// go first, until a quarter of the budget is free again (so a drive that barely
+    /// exceeds the budget writes little, and spills come in large blocks).
     pub fn maybe_spill(&mut self) -> Result<(), PipelineError> {
         if self.buffered_points <= self.budget_points {
             return Ok(());
@@ -320,10 +391,16 @@ impl Store {
                 d
             }
         };
-        for (k, buf) in self.buffers.iter_mut().enumerate() {
-            if buf.is_empty() {
-                continue;
+        let mut order: Vec<usize> = (0..self.buffers.len())
+            .filter(|&k| !self.buffers[k].is_empty())
+            .collect();
+        order.sort_by_key(|&k| (self.touched[k], k));
+        let target = self.budget_points - self.budget_points / 4;
+        for k in order {
+            if self.buffered_points <= target {
+                break;
             }
+            let buf = &mut self.buffers[k];
             let path = dir.join(format!("chunk-{k}.bin"));
             let f = OpenOptions::new()
                 .create(true)
@@ -335,10 +412,10 @@ impl Store {
                 .and_then(|_| w.flush())
                 .map_err(|e| io_err(&path, e))?;
             self.spilled_points += buf.len() as u64;
+            self.buffered_points -= buf.len();
             self.spilled[k] = true;
             buf.clear_release();
         }
-        self.buffered_points = 0;
         Ok(())
     }
 
@@ -446,6 +523,63 @@ mod tests {
         }
         drop(store);
         assert!(!dir.exists(), "the spill directory is removed");
+    }
+
+    #[test]
+    fn batch_appends_equal_point_appends() {
+        let plan = Plan::new(&params(40.0, 10.0), -20.0, 300.0);
+        let mut one = Store::new(plan, 16);
+        let mut many = Store::new(plan, 16);
+        let mut cloud = PointCloud::with_origin([0.0; 3]);
+        cloud.gps_time = Some(Vec::new());
+        let (mut ms, mut os) = (Vec::new(), Vec::new());
+        for i in 0..5000 {
+            let m = ((i * 7919) % 3200) as f64 * 0.1 - 20.0;
+            let o = ((i * 31) % 80) as f64 - 40.0;
+            cloud.push_local(i as f64, m, o, i as f32, Some(i as f64 * 0.5), (i % 2) as u8);
+            ms.push(m);
+            os.push(o);
+        }
+        let keep = |m: f64, o: f64| o.abs() <= 30.0 && m >= -10.0;
+        let mut kept = 0;
+        for i in 0..cloud.len() {
+            if keep(ms[i], os[i]) {
+                kept += 1;
+                let t = cloud.gps_time.as_ref().unwrap()[i];
+                one.push(
+                    cloud.x[i],
+                    cloud.y[i],
+                    cloud.z[i],
+                    cloud.intensity[i],
+                    t,
+                    cloud.scanner[i],
+                    ms[i],
+                    os[i],
+                );
+            }
+        }
+        // In two batches, with a spill between them.
+        let half = cloud.len() / 2;
+        let first: Vec<usize> = (0..half).collect();
+        let second: Vec<usize> = (half..cloud.len()).collect();
+        let n1 = many.push_cloud(&cloud.select(&first), &ms[..half], &os[..half], keep);
+        many.budget_points = 10;
+        many.maybe_spill().unwrap();
+        assert!(many.spilled_points > 0);
+        let n2 = many.push_cloud(&cloud.select(&second), &ms[half..], &os[half..], keep);
+        assert_eq!(n1 + n2, kept);
+        for k in plan.first..=plan.last {
+            assert_eq!(one.take(k).unwrap(), many.take(k).unwrap(), "chunk {k}");
+        }
+    }
+
+    #[test]
+    fn floor_matches_the_library() {
+        for v in [
+            -2.5, -2.0, -1e-300, -0.0, 0.0, 0.3, 1.0, 7.999999, -7.000001, 1e15, -1e15,
+        ] {
+            assert_eq!(floor_i64(v), v.floor() as i64, "{v}");
+        }
     }
 
     #[test]

@@ -221,6 +221,10 @@ fn run_ctx(ctx: &mut Ctx<'_>, inputs: &Inputs) -> Result<Extraction, PipelineErr
 }
 
 /// Stream every tile into the chunk store; returns the CRS of the first tile that has one.
+///
+/// A reader thread decodes the next batch while this one is located (in parallel blocks,
+/// each walking from point to point along the trajectory, see
+/// [`StationIndex::locate_near`]) and appended to the chunks.
 fn read_into(
     ctx: &mut Ctx<'_>,
     inputs: &Inputs,
@@ -239,7 +243,6 @@ fn read_into(
         .map(|p| io::inspect_points(p).map(|s| s.point_count))
         .sum::<Result<u64, _>>()?
         .max(1);
-    let mut batch = PointCloud::default();
     for path in &inputs.points {
         ctx.check()?;
         let mut reader = io::PointReader::open(path)?;
@@ -248,25 +251,55 @@ fn read_into(
             crs = reader.crs().cloned();
         }
         let chunk = reader.preferred_chunk().max(1 << 18);
-        let mut n_tile = 0u64;
-        while reader.next_chunk(&mut batch, chunk)? > 0 {
-            n_tile += batch.len() as u64;
-            ctx.stats.points_read += batch.len() as u64;
-            push_batch(
-                &batch,
-                [0.0; 3],
-                &index,
-                (m_lo, m_hi),
-                max_off,
-                store,
-                &mut ctx.stats,
-            );
-            store.maybe_spill()?;
-            ctx.progress
-                .report("read", READ_SHARE * ctx.stats.points_read as f64 / total as f64);
-            ctx.check()?;
+        // This thread decodes; a worker locates and stores the previous batch meanwhile.
+        // Buffers go round between the two through a pair of channels.
+        let (full_tx, full_rx) = std::sync::mpsc::sync_channel::<PointCloud>(1);
+        let (empty_tx, empty_rx) = std::sync::mpsc::sync_channel::<PointCloud>(3);
+        for _ in 0..3 {
+            empty_tx.send(PointCloud::default()).expect("receiver alive");
         }
-        if need_intensity && n_tile > 0 && reader.nonzero_intensity_count() == 0 {
+        let index = &index;
+        let (res, near) = std::thread::scope(|sc| {
+            let store = &mut *store;
+            let worker = sc.spawn(move || -> Result<u64, PipelineError> {
+                let mut stations = (Vec::new(), Vec::new());
+                let mut near = 0;
+                for batch in full_rx.iter() {
+                    near += push_batch(&batch, index, (m_lo, m_hi), max_off, store, &mut stations);
+                    store.maybe_spill()?;
+                    if empty_tx.send(batch).is_err() {
+                        break;
+                    }
+                }
+                Ok(near)
+            });
+            let mut run = || -> Result<u64, PipelineError> {
+                let mut n_tile = 0u64;
+                // A closed channel means the worker stopped on an error (reported below).
+                while let Ok(mut batch) = empty_rx.recv() {
+                    if reader.next_chunk(&mut batch, chunk)? == 0 {
+                        break;
+                    }
+                    n_tile += batch.len() as u64;
+                    ctx.stats.points_read += batch.len() as u64;
+                    ctx.progress
+                        .report("read", READ_SHARE * ctx.stats.points_read as f64 / total as f64);
+                    ctx.check()?;
+                    if full_tx.send(batch).is_err() {
+                        break;
+                    }
+                }
+                Ok(n_tile)
+            };
+            let res = run();
+            drop(full_tx);
+            let near = worker.join().expect("the locating thread does not panic");
+            (res, near)
+        });
+        ctx.stats.points_near_track += near?;
+        let n_tile = res?;
+        let nonzero = reader.nonzero_intensity_count();
+        if need_intensity && n_tile > 0 && nonzero == 0 {
             return Err(PipelineError::input(
                 path,
                 "has no intensity values (all zero); marking extraction needs intensity",
@@ -284,41 +317,36 @@ fn read_into(
     Ok(crs)
 }
 
-/// Locate a batch on the trajectory (in parallel) and append the points near it.
+/// Points per block located by one walk (the first point of a block asks the kd-tree).
+const LOCATE_BLOCK: usize = 8192;
+
+/// Locate a batch on the trajectory (parallel blocks) and append the points near it.
 fn push_batch(
     cloud: &PointCloud,
-    shift: [f64; 3],
     index: &StationIndex<'_>,
     (m_lo, m_hi): (f64, f64),
     max_off: f64,
     store: &mut Store,
-    stats: &mut RunStats,
-) {
-    let stations: Vec<(f64, f64)> = (0..cloud.len())
-        .into_par_iter()
-        .with_min_len(4096)
-        .map(|i| {
-            let s = index.locate(cloud.x[i] + shift[0], cloud.y[i] + shift[1]);
-            (s.mileage_m, s.offset_m)
-        })
-        .collect();
-    let times = cloud.gps_time.as_deref();
-    for (i, &(m, o)) in stations.iter().enumerate() {
-        if o.abs() > max_off || m < m_lo || m > m_hi {
-            continue;
-        }
-        stats.points_near_track += 1;
-        store.push(
-            cloud.x[i] + shift[0],
-            cloud.y[i] + shift[1],
-            cloud.z[i] + shift[2],
-            cloud.intensity[i],
-            times.map_or(f64::NAN, |t| t[i]),
-            cloud.scanner[i],
-            m,
-            o,
-        );
-    }
+    (mileage, offset): &mut (Vec<f64>, Vec<f64>),
+) -> u64 {
+    let n = cloud.len();
+    mileage.resize(n, 0.0);
+    offset.resize(n, 0.0);
+    mileage
+        .par_chunks_mut(LOCATE_BLOCK)
+        .zip(offset.par_chunks_mut(LOCATE_BLOCK))
+        .enumerate()
+        .for_each(|(b, (ms, os))| {
+            let base = b * LOCATE_BLOCK;
+            let mut hint = usize::MAX;
+            for (j, (m, o)) in ms.iter_mut().zip(os.iter_mut()).enumerate() {
+                let s = index.locate_near(cloud.x[base + j], cloud.y[base + j], &mut hint);
+                (*m, *o) = (s.mileage_m, s.offset_m);
+            }
+        });
+    store.push_cloud(cloud, &mileage[..n], &offset[..n], |m, o| {
+        o.abs() <= max_off && m >= m_lo && m <= m_hi
+    })
 }
 
 /// Pavement → rasterize → threshold for one chunk; returns the marking points of its core

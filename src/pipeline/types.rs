@@ -320,12 +320,48 @@ impl Trajectory {
     }
 }
 
-/// Fast nearest-station queries for many points: a kd-tree over segment sample points.
+/// Fast nearest-station queries for many points: a kd-tree over segment sample points, and
+/// a walk from the previous answer for points that come in acquisition order.
+///
+/// **Algorithm.** Every segment is sampled at most `step_m` apart (every pose is a sample).
+/// [`StationIndex::locate`] takes the nearest sample (kd-tree) and searches its segment and
+/// the two neighbours exactly. [`StationIndex::locate_near`] finds the nearest sample by
+/// walking along the samples from a hint (the previous point's sample): downhill steps,
+/// then a check of the `WALK_WINDOW` samples on each side so that jitter of the trajectory
+/// does not stop the walk early. The walk is trusted only where no far part of the track
+/// can be nearer: samples are grouped in blocks of [`BLOCK`] and every block knows its
+/// *clearance* (the distance from the block to the nearest sample more than
+/// [`FAR_ARC_M`] away along the track); a point closer than half the clearance to the
+/// walked sample cannot have its nearest sample on a far part of the track. Otherwise
+/// (far points, loops, the first point) the kd-tree answers.
+///
+/// **Complexity.** Build O(n log n); `locate` O(log n); `locate_near` O(1) amortised for
+/// points in acquisition order.
 pub struct StationIndex<'a> {
     traj: &'a Trajectory,
     tree: kiddo::ImmutableKdTree<f64, 2>,
     seg_of: Vec<usize>,
+    /// Sample positions (x, y), in track order.
+    samples: Vec<[f64; 2]>,
+    /// Unit direction and length of every segment (cached: `hypot` is costly per point).
+    dir: Vec<[f64; 2]>,
+    seg_len: Vec<f64>,
+    /// Per block of [`BLOCK`] samples: squared half clearance (see the type docs).
+    half_clear2: Vec<f64>,
+    /// Samples per metre of track.
+    per_m: f64,
 }
+
+/// Samples per clearance block of [`StationIndex`].
+const BLOCK: usize = 32;
+/// Along-track distance beyond which a part of the track counts as "far" (m).
+const FAR_ARC_M: f64 = 100.0;
+/// Samples checked on each side of a walk's local minimum.
+const WALK_WINDOW: usize = 6;
+/// Pose jitter the walk tolerates (m).
+const WALK_JITTER_M: f64 = 0.02;
+/// Walks longer than this give up and ask the kd-tree.
+const WALK_MAX_STEPS: usize = 256;
 
 impl<'a> StationIndex<'a> {
     /// Samples every segment at most `step_m` apart.
@@ -333,6 +369,7 @@ impl<'a> StationIndex<'a> {
         let step = step_m.max(0.01);
         let mut pts = Vec::new();
         let mut seg_of = Vec::new();
+        let mut arc = Vec::new();
         for i in 0..traj.poses.len() - 1 {
             let (a, b) = (&traj.poses[i], &traj.poses[i + 1]);
             let len = traj.cum_m[i + 1] - traj.cum_m[i];
@@ -341,25 +378,203 @@ impl<'a> StationIndex<'a> {
                 let f = j as f64 / k as f64;
                 pts.push([a.x + f * (b.x - a.x), a.y + f * (b.y - a.y)]);
                 seg_of.push(i);
+                arc.push(traj.cum_m[i] + f * len);
             }
         }
         let last = traj.poses.last().expect("trajectory has >= 2 poses");
         pts.push([last.x, last.y]);
         seg_of.push(traj.poses.len() - 2);
+        arc.push(traj.length_m());
         let tree = kiddo::ImmutableKdTree::new_from_slice(&pts).expect("finite trajectory samples");
-        Self { traj, tree, seg_of }
+        let dir = (0..traj.poses.len() - 1)
+            .map(|i| traj.segment_direction(i))
+            .collect();
+        let seg_len = traj.cum_m.windows(2).map(|w| w[1] - w[0]).collect();
+        let half_clear2 = block_clearance(&tree, &pts, &arc);
+        let per_m = pts.len() as f64 / traj.length_m().max(1e-3);
+        Self {
+            per_m,
+            traj,
+            tree,
+            seg_of,
+            samples: pts,
+            dir,
+            seg_len,
+            half_clear2,
+        }
     }
 
     /// Nearest station: the nearest sample's segment and its neighbours are searched exactly.
     pub fn locate(&self, x: f64, y: f64) -> Station {
-        let nn = self
-            .tree
+        self.station_near_sample(x, y, self.nearest_sample(x, y))
+    }
+
+    /// Like [`StationIndex::locate`], starting from `hint` (a sample index returned through
+    /// `hint` by the previous call; any value, e.g. `usize::MAX`, when there is none). Fast
+    /// for points in acquisition order.
+    pub fn locate_near(&self, x: f64, y: f64, hint: &mut usize) -> Station {
+        let s = match self.walk(x, y, *hint) {
+            Some(s) => s,
+            None => self.nearest_sample(x, y),
+        };
+        *hint = s;
+        self.station_near_sample(x, y, s)
+    }
+
+    fn nearest_sample(&self, x: f64, y: f64) -> usize {
+        self.tree
             .query(&[x, y])
             .nearest_one::<kiddo::SquaredEuclidean<f64>>()
-            .execute();
-        let s = self.seg_of[nn.item as usize];
-        self.traj.locate_in(x, y, Some((s.saturating_sub(1), s + 1)))
+            .execute()
+            .item as usize
     }
+
+    #[inline]
+    fn d2(&self, j: usize, x: f64, y: f64) -> f64 {
+        let q = self.samples[j];
+        (q[0] - x) * (q[0] - x) + (q[1] - y) * (q[1] - y)
+    }
+
+    /// The nearest sample found by walking from `hint`, when it is certainly not on a far
+    /// part of the track (see the type docs); `None` asks for the kd-tree.
+    fn walk(&self, x: f64, y: f64, hint: usize) -> Option<usize> {
+        let n = self.samples.len();
+        if hint >= n {
+            return None;
+        }
+        let mut s = hint;
+        let mut best = self.d2(s, x, y);
+        for _ in 0..WALK_MAX_STEPS {
+            // Downhill in the cheaper direction first, then the window around the minimum.
+            let mut moved = false;
+            while s + 1 < n {
+                let d = self.d2(s + 1, x, y);
+                if d < best {
+                    (s, best, moved) = (s + 1, d, true);
+                } else {
+                    break;
+                }
+            }
+            if !moved {
+                while s > 0 {
+                    let d = self.d2(s - 1, x, y);
+                    if d < best {
+                        (s, best) = (s - 1, d);
+                    } else {
+                        break;
+                    }
+                }
+            }
+            // Jitter of the poses makes shallow local minima over a length that grows
+            // with the distance: sqrt(8 d jitter).
+            let w = ((8.0 * best.sqrt() * WALK_JITTER_M).sqrt() * self.per_m).ceil() as usize;
+            let w = w.max(WALK_WINDOW);
+            let (lo, hi) = (s.saturating_sub(w), (s + w).min(n - 1));
+            let mut bs = s;
+            for j in lo..=hi {
+                let d = self.d2(j, x, y);
+                if d < best {
+                    (bs, best) = (j, d);
+                }
+            }
+            if bs == s {
+                return (best < self.half_clear2[s / BLOCK]).then_some(s);
+            }
+            s = bs;
+        }
+        None
+    }
+
+    /// Nearest station among the segment of sample `s` and its two neighbours (what
+    /// [`Trajectory::locate_in`] computes, with cached directions).
+    fn station_near_sample(&self, x: f64, y: f64, s: usize) -> Station {
+        let seg = self.seg_of[s];
+        let n = self.dir.len();
+        let (lo, hi) = (seg.saturating_sub(1), (seg + 1).min(n - 1));
+        let mut best: (f64, usize, f64, f64, f64, f64, f64) = (f64::INFINITY, 0, 0.0, 0.0, 0.0, 0.0, 0.0);
+        for i in lo..=hi {
+            let a = &self.traj.poses[i];
+            let d = self.dir[i];
+            let len = self.seg_len[i];
+            let (rx, ry) = (x - a.x, y - a.y);
+            let along = rx * d[0] + ry * d[1];
+            let cl = along.clamp(0.0, len);
+            let (px, py) = (a.x + cl * d[0], a.y + cl * d[1]);
+            let dist2 = (x - px) * (x - px) + (y - py) * (y - py);
+            // Squared distances order like `locate_in`'s `hypot` ones except at near ties
+            // (a point on the bisector of two segments): those are decided like there.
+            let closer = if best.0.is_infinite() || (dist2 - best.0).abs() > 1e-12 * best.0 {
+                dist2 < best.0
+            } else {
+                (x - px).hypot(y - py) < best.5.hypot(best.6)
+            };
+            if closer {
+                let side = d[0] * ry - d[1] * rx;
+                best = (dist2, i, along, cl, side, x - px, y - py);
+            }
+        }
+        let (_, i, along, cl, side, ex, ey) = best;
+        let len = self.seg_len[i];
+        let cum = self.traj.cum_m[i];
+        let mileage = if (i == 0 && along < 0.0) || (i + 1 == n && along > len) {
+            cum + along
+        } else {
+            cum + cl
+        };
+        let offset = if cl == along {
+            side
+        } else {
+            ex.hypot(ey).copysign(if side == 0.0 { 1.0 } else { side })
+        };
+        Station {
+            mileage_m: mileage,
+            offset_m: offset,
+            direction: self.dir[i],
+            segment: i,
+        }
+    }
+}
+
+/// Per block of [`BLOCK`] consecutive samples: (clearance / 2)², the clearance being the
+/// distance from any sample of the block to the nearest sample more than [`FAR_ARC_M`]
+/// along the track away from the whole block (infinite when there is none within a few
+/// hundred metres; points that far are never near the track anyway, and fall back).
+fn block_clearance(tree: &kiddo::ImmutableKdTree<f64, 2>, pts: &[[f64; 2]], arc: &[f64]) -> Vec<f64> {
+    const SEARCH_M: f64 = 250.0;
+    (0..pts.len().div_ceil(BLOCK))
+        .map(|b| {
+            let (lo, hi) = (b * BLOCK, ((b + 1) * BLOCK).min(pts.len()));
+            let c = pts[(lo + hi) / 2];
+            let radius = pts[lo..hi]
+                .iter()
+                .map(|q| (q[0] - c[0]).hypot(q[1] - c[1]))
+                .fold(0.0, f64::max);
+            let (a_lo, a_hi) = (arc[lo] - FAR_ARC_M, arc[hi - 1] + FAR_ARC_M);
+            let r = SEARCH_M + radius;
+            let nearest_far = tree
+                .query(&c)
+                .within::<kiddo::SquaredEuclidean<f64>>(r * r)
+                .unsorted()
+                .execute()
+                .into_iter()
+                .filter(|nb| {
+                    let a = arc[nb.item as usize];
+                    a < a_lo || a > a_hi
+                })
+                .map(|nb| nb.distance.sqrt())
+                .fold(r, f64::min);
+            // |p - q_far| >= |q_far - c| - radius - |p - q_s| - 2 radius (q_s within radius of c).
+            let clear = (nearest_far - 2.0 * radius).max(0.0);
+            if nearest_far >= r {
+                // Nothing far within the search: |p - q_s| < SEARCH_M / 2 - radius is safe.
+                let h = (SEARCH_M / 2.0 - radius).max(0.0);
+                h * h
+            } else {
+                let h = clear / 2.0;
+                h * h
+            }
+        })
+        .collect()
 }
 
 /// Marking classes of the contract (`properties.class`).
@@ -551,6 +766,87 @@ mod tests {
         );
         let (p, _) = t.at_mileage(12.0);
         assert!((p[0] - 10.0).abs() < 1e-12 && (p[1] - 2.0).abs() < 1e-12);
+    }
+
+    /// A jittered S-bend sampled at 100 Hz, and points swept across it in scan lines (the
+    /// order of acquisition), some of them far away.
+    fn jittered_drive() -> (Trajectory, Vec<[f64; 2]>) {
+        let mut rng = 12345u64;
+        let mut noise = move || {
+            rng = rng
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((rng >> 11) as f64 / (1u64 << 53) as f64) - 0.5
+        };
+        let mut poses = Vec::new();
+        let (mut x, mut y, mut h) = (0.0f64, 0.0f64, 0.0f64);
+        for i in 0..6000 {
+            let curv = 0.02 * (i as f64 / 1500.0).sin();
+            h += curv * 0.15;
+            x += 0.15 * h.cos();
+            y += 0.15 * h.sin();
+            poses.push(pose(i as f64 * 0.01, x + 0.01 * noise(), y + 0.01 * noise()));
+        }
+        let t = Trajectory::new(poses).unwrap();
+        let mut pts = Vec::new();
+        for line in 0..3000 {
+            let (c, d) = t.at_mileage(line as f64 * 0.3);
+            for k in 0..60 {
+                let r = (k as f64 - 30.0) * 1.5 + noise();
+                let along = noise() * 0.2;
+                pts.push([c[0] - d[1] * r + d[0] * along, c[1] + d[0] * r + d[1] * along]);
+            }
+            // Now and then a point far out (a building, the sky).
+            pts.push([c[0] + 400.0 * noise(), c[1] + 400.0 * noise()]);
+        }
+        (t, pts)
+    }
+
+    #[test]
+    fn walking_from_the_previous_point_matches_the_kd_tree() {
+        let (t, pts) = jittered_drive();
+        let idx = StationIndex::new(&t, 1.0);
+        let mut hint = usize::MAX;
+        let mut same = 0;
+        let check = |k: usize, walked: Station, tree: Station| {
+            // Where they differ, the two stations are equally near (a near tie).
+            assert!(
+                (walked.offset_m.abs() - tree.offset_m.abs()).abs() < 1e-3,
+                "point {k}: {walked:?} {tree:?}"
+            );
+            assert!((walked.mileage_m - tree.mileage_m).abs() < 2.0, "point {k}");
+            walked == tree
+        };
+        for (k, p) in pts.iter().enumerate() {
+            let walked = idx.locate_near(p[0], p[1], &mut hint);
+            same += check(k, walked, idx.locate(p[0], p[1])) as usize;
+        }
+        assert!(same as f64 >= 0.999 * pts.len() as f64, "{same} of {}", pts.len());
+        // Any hint gives (almost always) the kd-tree's answer.
+        let mut same = 0;
+        let mut n = 0;
+        for (k, p) in pts.iter().enumerate().step_by(97) {
+            let mut far_hint = (k * 7919) % 6000;
+            let walked = idx.locate_near(p[0], p[1], &mut far_hint);
+            same += check(k, walked, idx.locate(p[0], p[1])) as usize;
+            n += 1;
+        }
+        assert!(same as f64 >= 0.99 * n as f64, "{same} of {n}");
+    }
+
+    #[test]
+    fn station_index_agrees_with_the_exact_search_on_a_jittered_track() {
+        let (t, pts) = jittered_drive();
+        let idx = StationIndex::new(&t, 1.0);
+        let mut worst: f64 = 0.0;
+        for p in pts.iter().step_by(7) {
+            let fast = idx.locate(p[0], p[1]);
+            let slow = t.locate(p[0], p[1]);
+            if fast.offset_m.abs() < 30.0 {
+                worst = worst.max((fast.offset_m.abs() - slow.offset_m.abs()).abs());
+            }
+        }
+        assert!(worst < 1e-3, "offset error {worst}");
     }
 
     #[test]
