@@ -609,6 +609,27 @@ fn simulated_scenes_isolated() {
     }
 }
 
+/// Isolated numbers on existing survey directories: every subdirectory of `VEC_SCENES`
+/// holding `labels.bin` (e.g. the five default scenes).
+/// `VEC_SCENES=/work/scenes cargo test --release --test vector scenes_dir_isolated -- --ignored --nocapture`
+#[test]
+#[ignore]
+fn scenes_dir_isolated() {
+    let Ok(root) = std::env::var("VEC_SCENES") else { return };
+    let mut dirs: Vec<std::path::PathBuf> = std::fs::read_dir(&root)
+        .expect("VEC_SCENES")
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.join("labels.bin").exists())
+        .collect();
+    dirs.sort();
+    if let Ok(only) = std::env::var("VEC_ONLY") {
+        dirs.retain(|d| d.file_name().is_some_and(|n| n.to_string_lossy().contains(&only)));
+    }
+    for d in dirs {
+        run_isolated_dir(&d);
+    }
+}
+
 /// Debug view of one simulated scene directory (env `VEC_SIM_DIR`): the isolated numbers,
 /// per truth lane line the result lines near it, and `VEC_SIM_DIR/debug_*.png`, a top view
 /// in the (mileage, offset) frame (10 cm × 5 cm pixels): paint grey, result outlines by
@@ -635,6 +656,30 @@ fn debug_scene() {
     }
     let refl = roadmark::pipeline::refline::RefLine::new(&iso.traj);
     let so = |p: [f64; 2]| refl.locate(p);
+    if std::env::var("VEC_DUMP").is_ok() {
+        let local = iso.traj.to_local(iso.marks.origin);
+        let clusters = cluster::run(&iso.marks, &cluster::Params::default());
+        for (c, d) in classify::assess(&iso.marks, &clusters, &local, &classify::Params::default()) {
+            let s = &c.shape;
+            eprintln!(
+                "cand {:?} drop {:?} n {} s {:.1} o {:.2} len {:.2} wid {:.2} fill {:.2} ang {:.0} line {:?}",
+                c.class,
+                d,
+                s.point_count,
+                s.mileage_m,
+                s.offset_m,
+                s.length_m,
+                s.width_m,
+                s.fill_ratio,
+                s.angle_to_trajectory_deg,
+                c.line.as_ref().map(|l| (
+                    (l.stations[0][0] * 10.0).round() / 10.0,
+                    (l.stations[l.stations.len() - 1][0] * 10.0).round() / 10.0,
+                    (l.width_m * 100.0).round() / 100.0
+                ))
+            );
+        }
+    }
     for t in &iso.truth.lane_lines {
         let st: Vec<[f64; 2]> = t.line.iter().map(|&p| so(p)).collect();
         let o = st.iter().map(|q| q[1]).sum::<f64>() / st.len() as f64;
@@ -708,7 +753,8 @@ fn debug_scene() {
         for y in 0..h {
             data.extend_from_slice(&img[(y * w + x0) * 3..(y * w + x0 + tw) * 3]);
         }
-        let path = dir.join(format!("debug_{k}.png"));
+        let out = std::env::var("VEC_PNG_DIR").map_or(dir.clone(), std::path::PathBuf::from);
+        let path = out.join(format!("debug_{k}.png"));
         let f = std::fs::File::create(&path).expect("png file");
         let mut enc = png::Encoder::new(std::io::BufWriter::new(f), tw as u32, h as u32);
         enc.set_color(png::ColorType::Rgb);

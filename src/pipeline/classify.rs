@@ -552,15 +552,20 @@ fn rule(mut c: Candidate, p: &Params) -> (Candidate, Option<DropReason>) {
     }
     let aspect = s.length_m / s.width_m.max(1e-3);
     if let Some(l) = &c.line {
-        // Narrower than any painted line: a sliver or a single row of points.
-        if l.width_m < 0.05 {
+        // Sparse far-range paint is sampled by one or two points per scan line, so the
+        // measured extent of the residuals under-reads the painted width by about one point
+        // spacing: a line is judged by extent + spacing (capped, so scattered noise is not
+        // made wide).
+        let eff_width = l.width_m + s.spacing_m.min(0.1);
+        // Narrower than any painted line even so: a sliver or a single row of points.
+        if eff_width < 0.05 {
             c.class = MarkingClass::Unknown;
             c.confidence = 0.2;
             return (c, None);
         }
         if l.width_m <= p.line_max_width_m {
-            let ratio = l.length_m / l.width_m.max(0.05);
-            let wq = inside(l.width_m, 0.06, p.line_max_width_m);
+            let ratio = l.length_m / eff_width.max(0.05);
+            let wq = inside(eff_width.min(p.line_max_width_m), 0.06, p.line_max_width_m);
             let stripe = l.width_m >= p.crosswalk_min_width_m
                 && l.width_m <= p.crosswalk_max_width_m
                 && (1.5..=10.0).contains(&l.length_m);
@@ -617,9 +622,34 @@ fn rule(mut c: Candidate, p: &Params) -> (Candidate, Option<DropReason>) {
     (c, None)
 }
 
+/// Two stripes of one group: centres ≤ `max_d` apart, parallel, similar size, side by side
+/// (not one after the other).
+fn stripe_neighbours(a: &Shape, b: &Shape, max_d: f64) -> bool {
+    (a.center[0] - b.center[0]).hypot(a.center[1] - b.center[1]) <= max_d
+        && geom::acute_angle_deg(a.axis, b.axis) <= 10.0
+        && a.width_m.min(b.width_m) >= 0.6 * a.width_m.max(b.width_m)
+        && a.length_m.min(b.length_m) >= 0.5 * a.length_m.max(b.length_m)
+        && ((b.center[0] - a.center[0]) * a.axis[0] + (b.center[1] - a.center[1]) * a.axis[1]).abs()
+            <= 0.5 * a.length_m.max(b.length_m)
+}
+
 /// Crosswalk and guideline stripes need a parallel neighbour of similar size; lone ones
 /// become `unknown` (or noise when steep).
 fn confirm_groups(items: &mut [(Candidate, Option<DropReason>)]) {
+    // Zebra stripes across a side street run across the trajectory and look like stop
+    // lines one by one; a stop line never has a parallel bar of its size beside it.
+    let stops: Vec<usize> = (0..items.len())
+        .filter(|&i| items[i].1.is_none() && items[i].0.class == MarkingClass::StopLine)
+        .collect();
+    let zebra: Vec<usize> = stops
+        .iter()
+        .copied()
+        .filter(|&i| stops.iter().any(|&j| j != i && stripe_neighbours(&items[i].0.shape, &items[j].0.shape, 2.5)))
+        .collect();
+    for i in zebra {
+        items[i].0.class = MarkingClass::Crosswalk;
+        items[i].0.confidence = 0.75;
+    }
     let kinds = [MarkingClass::Crosswalk, MarkingClass::Guideline];
     let mut verdict: Vec<Option<bool>> = vec![None; items.len()];
     for kind in kinds {
@@ -629,17 +659,9 @@ fn confirm_groups(items: &mut [(Candidate, Option<DropReason>)]) {
         let max_d = if kind == MarkingClass::Crosswalk { 2.5 } else { 6.0 };
         for &i in &idx {
             let a = &items[i].0.shape;
-            let ok = idx.iter().any(|&j| {
-                let b = &items[j].0.shape;
-                j != i
-                    && (a.center[0] - b.center[0]).hypot(a.center[1] - b.center[1]) <= max_d
-                    && geom::acute_angle_deg(a.axis, b.axis) <= 10.0
-                    && a.width_m.min(b.width_m) >= 0.6 * a.width_m.max(b.width_m)
-                    && a.length_m.min(b.length_m) >= 0.5 * a.length_m.max(b.length_m)
-                    // side by side, not one after the other
-                    && ((b.center[0] - a.center[0]) * a.axis[0] + (b.center[1] - a.center[1]) * a.axis[1]).abs()
-                        <= 0.5 * a.length_m.max(b.length_m)
-            });
+            let ok = idx
+                .iter()
+                .any(|&j| j != i && stripe_neighbours(a, &items[j].0.shape, max_d));
             verdict[i] = Some(ok);
         }
     }

@@ -406,7 +406,10 @@ fn valley_split(pts: &[[f64; 2]], p: &Params) -> Option<Vec<Vec<usize>>> {
             sw.push(c);
         }
     }
-    let h = (len / 10.0).max(2.0);
+    // The bandwidth stays short on long clusters: a local linear fit over tens of metres
+    // of a curved line is biased by decimetres (≈ h²/2R), which smears the residuals of ONE
+    // line into two false modes.
+    let h = (len / 10.0).clamp(2.0, 5.0);
     let centre: Vec<f64> = (0..ns)
         .map(|k| {
             let u = umin + (k as f64 + 0.5) * DS;
@@ -422,7 +425,9 @@ fn valley_split(pts: &[[f64; 2]], p: &Params) -> Option<Vec<Vec<usize>>> {
             q[1] - (centre[k] + (f - k as f64) * (centre[k1] - centre[k]))
         })
         .collect();
-    if let Some(cut) = find_valley(&resid, 0.02, 0.12, p) {
+    // Modes ≥ 0.2 m apart: two painted lines side by side (centre to centre ≥ 0.25 m for
+    // 0.1 m lines 0.15 m apart); closer modes are the scan pattern inside one line.
+    if let Some(cut) = find_valley(&resid, 0.02, 0.2, p) {
         let (a, b): (Vec<usize>, Vec<usize>) = (0..pts.len()).partition(|&i| resid[i] < cut);
         return Some(vec![a, b]);
     }

@@ -172,7 +172,8 @@ pub struct Lanes {
 
 /// A piece in the trajectory frame.
 struct Item {
-    key: usize,
+    /// Caller keys (several when overlapping duplicates were merged).
+    keys: Vec<usize>,
     /// (s, o) samples sorted by s.
     so: Vec<[f64; 2]>,
     width: f64,
@@ -322,14 +323,15 @@ pub fn grow(pieces: &[LanePiece], traj: &Trajectory, p: &Params) -> Lanes {
             let mut so: Vec<[f64; 2]> = q.centerline.iter().map(|&v| refl.locate(v)).collect();
             so.sort_by(|a, b| a[0].total_cmp(&b[0]));
             (so[so.len() - 1][0] - so[0][0] >= 0.3).then(|| Item {
-                key: q.key,
+                keys: vec![q.key],
                 so,
                 width: q.width_m.max(0.01),
                 conf: q.confidence,
             })
         })
         .collect();
-    items.sort_by(|a, b| a.so[0][0].total_cmp(&b.so[0][0]).then(a.key.cmp(&b.key)));
+    items.sort_by(|a, b| a.so[0][0].total_cmp(&b.so[0][0]).then(a.keys.cmp(&b.keys)));
+    let items = merge_overlaps(items);
     // Round 1: pieces; round 2: chains.
     let segs: Vec<Seg> = (0..items.len()).map(|i| seg_of(&items, vec![i])).collect();
     let chains1: Vec<Vec<usize>> = link(&segs, p)
@@ -368,15 +370,18 @@ pub fn grow(pieces: &[LanePiece], traj: &Trajectory, p: &Params) -> Lanes {
                 LaneLineClass::SolidLine => MarkingClass::SolidLine,
                 LaneLineClass::DashedLine => MarkingClass::DashedLine,
             };
-            out.classes
-                .extend(members.iter().map(|&m| (items[m].key, piece_class)));
+            out.classes.extend(
+                members
+                    .iter()
+                    .flat_map(|&m| items[m].keys.iter().map(move |&k| (k, piece_class))),
+            );
             let start = refl.locate(line[0]);
             out.lines.push(LaneResult {
                 class,
                 length_m: geom::polyline_length(&line),
                 line,
                 confidence: (mean_conf * (0.6 + 0.4 * support) * (0.5 + 0.5 * fit)).clamp(0.0, 1.0),
-                pieces: members.iter().map(|&m| items[m].key).collect(),
+                pieces: members.iter().flat_map(|&m| items[m].keys.iter().copied()).collect(),
                 start,
             });
         }
@@ -387,6 +392,83 @@ pub fn grow(pieces: &[LanePiece], traj: &Trajectory, p: &Params) -> Lanes {
             .then(a.start[1].total_cmp(&b.start[1]))
     });
     out.classes.sort_unstable_by_key(|c| c.0);
+    out
+}
+
+/// Median offset of the samples of `so` with s in [a, b].
+fn median_offset_in(so: &[[f64; 2]], a: f64, b: f64) -> Option<f64> {
+    let mut v: Vec<f64> = so.iter().filter(|q| q[0] >= a && q[0] <= b).map(|q| q[1]).collect();
+    (!v.is_empty()).then(|| geom::median(&mut v))
+}
+
+/// Merge pieces that cover the same stretch of the same painted line (a line split
+/// lengthwise into strips, duplicates from two scanner heads or overlapping chunks): they
+/// overlap along the road by ≥ 0.5 m (or half the shorter one) and their median offsets
+/// over the overlap differ by less than half the wider piece plus 5 cm. Side-by-side lines
+/// (≥ 0.25 m centre to centre) are never merged. Input sorted by start; output too.
+fn merge_overlaps(items: Vec<Item>) -> Vec<Item> {
+    let n = items.len();
+    let mut parent: Vec<usize> = (0..n).collect();
+    fn find(p: &mut [usize], mut a: usize) -> usize {
+        while p[a] != a {
+            p[a] = p[p[a]];
+            a = p[a];
+        }
+        a
+    }
+    let ext = |it: &Item| (it.so[0][0], it.so[it.so.len() - 1][0]);
+    let mut any = false;
+    for i in 0..n {
+        let (a0, a1) = ext(&items[i]);
+        for j in i + 1..n {
+            let (b0, b1) = ext(&items[j]);
+            if b0 >= a1 {
+                break;
+            }
+            let (lo, hi) = (a0.max(b0), a1.min(b1));
+            let ov = hi - lo;
+            if ov < 0.5_f64.min(0.5 * (a1 - a0).min(b1 - b0)) {
+                continue;
+            }
+            let (Some(oa), Some(ob)) = (median_offset_in(&items[i].so, lo, hi), median_offset_in(&items[j].so, lo, hi))
+            else {
+                continue;
+            };
+            if (oa - ob).abs() < 0.5 * items[i].width.max(items[j].width) + 0.05 {
+                let (ri, rj) = (find(&mut parent, i), find(&mut parent, j));
+                parent[ri.max(rj)] = ri.min(rj);
+                any = true;
+            }
+        }
+    }
+    if !any {
+        return items;
+    }
+    let mut slots: Vec<Option<Item>> = items.into_iter().map(Some).collect();
+    let mut out: Vec<Item> = Vec::new();
+    let mut at: Vec<Option<usize>> = vec![None; n];
+    for i in 0..n {
+        let r = find(&mut parent, i);
+        let it = slots[i].take().expect("each item once");
+        match at[r] {
+            None => {
+                at[r] = Some(out.len());
+                out.push(it);
+            }
+            Some(k) => {
+                let m = &mut out[k];
+                m.so.extend(it.so);
+                m.keys.extend(it.keys);
+                m.width = m.width.max(it.width);
+                m.conf = m.conf.max(it.conf);
+            }
+        }
+    }
+    for m in &mut out {
+        m.so.sort_by(|a, b| a[0].total_cmp(&b[0]));
+        m.keys.sort_unstable();
+    }
+    out.sort_by(|a, b| a.so[0][0].total_cmp(&b.so[0][0]).then(a.keys.cmp(&b.keys)));
     out
 }
 
