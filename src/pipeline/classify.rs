@@ -247,6 +247,12 @@ pub fn assess(
         .into_par_iter()
         .map(|g| describe(&xy, &cloud.intensity, g, &refl, params))
         .collect();
+    // Long clusters that failed the line test: a line with something attached (gore
+    // chevrons, an arrow, a second line of a double line). Peel the lines off.
+    let feats: Vec<Candidate> = feats
+        .into_par_iter()
+        .flat_map_iter(|c| peel_lines(c, &xy, &cloud.intensity, &refl, params))
+        .collect();
     let feats = rejoin(feats, &xy, &cloud.intensity, &refl, params);
     let mut out: Vec<(Candidate, Option<DropReason>)> = feats.into_iter().map(|c| rule(c, params)).collect();
     confirm_groups(&mut out);
@@ -398,6 +404,155 @@ fn line_geometry(pts: &[[f64; 2]], refl: &RefLine, p: &Params) -> Option<LineGeo
         width_m: width,
         length_m: length,
         sagitta_m: sagitta,
+    })
+}
+
+/// Split painted lines off a long cluster that is not one line (see `assess`): in the
+/// trajectory frame, per 0.5 m mileage slice, the offsets form runs (intervals without a
+/// gap > 0.1 m or 1.5 point spacings); a dynamic programme over the slices finds the
+/// longest track of line-wide runs (≤ `line_max_width_m`) with near-constant offset
+/// (≤ 0.1 m + 0.02 m per skipped slice from one to the next, up to 4 slices skipped where
+/// something crosses the line). A track at least `solid_min_length_m` long takes every
+/// point within its half width (+3 cm) of the track's centre; the rest is re-clustered
+/// (0.25 m components) and peeled again, up to three lines. Cost: O(m log m) for m points.
+fn peel_lines(c: Candidate, xy: &[[f64; 2]], intensity: &[f32], refl: &RefLine, p: &Params) -> Vec<Candidate> {
+    if c.line.is_some() || c.indices.len() < 40 {
+        return vec![c];
+    }
+    let mut out = Vec::new();
+    let mut rest = c.indices;
+    for _round in 0..3 {
+        let so: Vec<[f64; 2]> = rest.iter().map(|&i| refl.locate(xy[i])).collect();
+        let (s_lo, s_hi) = so.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, q| (a.0.min(q[0]), a.1.max(q[0])));
+        if s_hi - s_lo < p.solid_min_length_m {
+            break;
+        }
+        let Some(track) = line_track(&so, s_lo, s_hi, p) else { break };
+        let (mut line, mut other) = (Vec::new(), Vec::new());
+        for (k, &i) in rest.iter().enumerate() {
+            if track(so[k]) {
+                line.push(i);
+            } else {
+                other.push(i);
+            }
+        }
+        if line.len() < 20 {
+            break;
+        }
+        let cand = describe(xy, intensity, line, refl, p);
+        if cand.line.is_none() {
+            // Not a clean line after all: keep the cluster as it was.
+            other.extend(cand.indices);
+            rest = other;
+            break;
+        }
+        out.push(cand);
+        rest = other;
+    }
+    if out.is_empty() {
+        return vec![describe(xy, intensity, rest, refl, p)];
+    }
+    let pts: Vec<[f64; 2]> = rest.iter().map(|&i| xy[i]).collect();
+    for comp in geom::components(&pts, 0.25) {
+        let idx: Vec<usize> = comp.into_iter().map(|k| rest[k]).collect();
+        out.push(describe(xy, intensity, idx, refl, p));
+    }
+    out
+}
+
+/// The longest line track through the (s, o) samples (see `peel_lines`): a membership test.
+fn line_track(so: &[[f64; 2]], s_lo: f64, s_hi: f64, p: &Params) -> Option<impl Fn([f64; 2]) -> bool> {
+    const DS: f64 = 0.5;
+    const MAX_SKIP: usize = 4;
+    let ns = ((s_hi - s_lo) / DS).ceil() as usize + 1;
+    let mut slices: Vec<Vec<f64>> = vec![Vec::new(); ns];
+    for q in so {
+        slices[(((q[0] - s_lo) / DS) as usize).min(ns - 1)].push(q[1]);
+    }
+    // Runs per slice: (lo, hi, count).
+    let mut runs: Vec<Vec<(f64, f64, usize)>> = Vec::with_capacity(ns);
+    for sl in &mut slices {
+        sl.sort_unstable_by(f64::total_cmp);
+        let mut r: Vec<(f64, f64, usize)> = Vec::new();
+        // Gap threshold from the slice's own sampling: sparse lines stay one run.
+        let n = sl.len();
+        let gap = if n >= 2 {
+            let mut d: Vec<f64> = sl.windows(2).map(|w| w[1] - w[0]).collect();
+            (1.5 * geom::median(&mut d)).clamp(0.1, 0.2)
+        } else {
+            0.1
+        };
+        for &o in sl.iter() {
+            match r.last_mut() {
+                Some(l) if o - l.1 <= gap => {
+                    l.1 = o;
+                    l.2 += 1;
+                }
+                _ => r.push((o, o, 1)),
+            }
+        }
+        r.retain(|q| q.1 - q.0 <= p.line_max_width_m);
+        runs.push(r);
+    }
+    // DP: best[k][j] = (track length in slices, previous (k, j)).
+    let mut best: Vec<Vec<(usize, Option<(usize, usize)>)>> = runs.iter().map(|r| vec![(1, None); r.len()]).collect();
+    for k in 0..ns {
+        for j in 0..runs[k].len() {
+            let c = 0.5 * (runs[k][j].0 + runs[k][j].1);
+            let mut b = (1usize, None);
+            for back in 1..=MAX_SKIP + 1 {
+                if back > k {
+                    break;
+                }
+                let kk = k - back;
+                for (jj, r) in runs[kk].iter().enumerate() {
+                    let cc = 0.5 * (r.0 + r.1);
+                    if (c - cc).abs() <= 0.1 + 0.02 * (back - 1) as f64 && best[kk][jj].0 + 1 > b.0 {
+                        b = (best[kk][jj].0 + 1, Some((kk, jj)));
+                    }
+                }
+            }
+            best[k][j] = b;
+        }
+    }
+    let (mut k, mut j) = (0..ns)
+        .flat_map(|k| (0..runs[k].len()).map(move |j| (k, j)))
+        .max_by(|a, b| best[a.0][a.1].0.cmp(&best[b.0][b.1].0).then(b.cmp(a)))?;
+    let mut path: Vec<(f64, f64, f64)> = Vec::new(); // (s centre, o centre, width)
+    loop {
+        let r = runs[k][j];
+        path.push((s_lo + (k as f64 + 0.5) * DS, 0.5 * (r.0 + r.1), r.1 - r.0));
+        match best[k][j].1 {
+            Some((kk, jj)) => {
+                k = kk;
+                j = jj;
+            }
+            None => break,
+        }
+    }
+    path.reverse();
+    let (t0, t1) = (path[0].0 - DS / 2.0, path[path.len() - 1].0 + DS / 2.0);
+    if t1 - t0 < p.solid_min_length_m {
+        return None;
+    }
+    let mut ws: Vec<f64> = path.iter().map(|q| q.2).collect();
+    let half = geom::median(&mut ws) / 2.0 + 0.03;
+    let ps: Vec<f64> = path.iter().map(|q| q.0).collect();
+    let po: Vec<f64> = path.iter().map(|q| q.1).collect();
+    Some(move |q: [f64; 2]| {
+        if q[0] < t0 || q[0] > t1 {
+            return false;
+        }
+        let i = ps.partition_point(|&s| s < q[0]);
+        let c = if i == 0 {
+            po[0]
+        } else if i >= ps.len() {
+            po[ps.len() - 1]
+        } else {
+            let f = (q[0] - ps[i - 1]) / (ps[i] - ps[i - 1]).max(1e-9);
+            po[i - 1] + f * (po[i] - po[i - 1])
+        };
+        (q[1] - c).abs() <= half
     })
 }
 

@@ -273,7 +273,9 @@ fn link(segs: &[Seg], p: &Params) -> Vec<Vec<usize>> {
             if (sa.slope1.atan() - sb.slope0.atan()).abs() > max_tan {
                 continue;
             }
-            if sa.width.min(sb.width) < p.min_width_similarity * sa.width.max(sb.width) {
+            // Widths compared with 5 cm added: sparse far-range pieces under-read their
+            // width by about a point spacing, which must not break a line.
+            if sa.width.min(sb.width) + 0.05 < p.min_width_similarity * (sa.width.max(sb.width) + 0.05) {
                 continue;
             }
             let cost = dev / tol.max(1e-6) + 0.5 * g / p.max_gap_m.max(1e-6);
