@@ -599,6 +599,28 @@ fn run_isolated_dir(dir: &std::path::Path) -> Isolated {
     }
 }
 
+/// CI guard of the isolated back half: a short highway survey (true paint points →
+/// cluster → classify → vectorize), scored against the truth. The thresholds sit a margin
+/// below what the stages reach (measured: see the final report of the vector branch), so a
+/// regression fails here; the five full scenes run in `scenes_dir_isolated`.
+#[test]
+fn short_highway_isolated_meets_lane_thresholds() {
+    let r = isolated("highway", Some(80.0), 3);
+    let l = &r.lanes;
+    let get = |v: Option<f64>, what: &str| v.unwrap_or_else(|| panic!("{what} not measured"));
+    assert!(l.result_lines > 0, "no lane lines");
+    assert!(get(l.completeness, "completeness") >= 0.7, "completeness {:?}", l.completeness);
+    assert!(get(l.correctness, "correctness") >= 0.9, "correctness {:?}", l.correctness);
+    assert!(get(l.rmse_m, "rmse") <= 0.05, "rmse {:?}", l.rmse_m);
+    assert!(get(l.fragmentation_mean, "fragmentation") <= 1.3, "fragmentation {:?}", l.fragmentation_mean);
+    assert!(get(r.solid_line.recall, "solid recall") >= 0.6, "solid recall {:?}", r.solid_line.recall);
+    assert!(
+        get(r.objects.detection.f_score, "detection F") >= 0.65,
+        "detection F {:?}",
+        r.objects.detection.f_score
+    );
+}
+
 /// All five scenes at their default length (slow: run explicitly).
 /// `cargo test --release --test vector simulated_scenes -- --ignored --nocapture`
 #[test]
@@ -705,7 +727,7 @@ fn debug_scene() {
     let w = ((s_hi - s_lo) / px_s) as usize + 1;
     let h = ((o_hi - o_lo) / px_o) as usize + 1;
     let mut img = vec![0u8; w * h * 3];
-    let mut put = |img: &mut Vec<u8>, q: [f64; 2], c: [u8; 3]| {
+    let put = |img: &mut Vec<u8>, q: [f64; 2], c: [u8; 3]| {
         let (x, y) = (((q[0] - s_lo) / px_s) as i64, ((o_hi - q[1]) / px_o) as i64);
         if x >= 0 && y >= 0 && (x as usize) < w && (y as usize) < h {
             let i = (y as usize * w + x as usize) * 3;
@@ -715,7 +737,7 @@ fn debug_scene() {
     for q in &pts {
         put(&mut img, *q, [110, 110, 110]);
     }
-    let mut draw_line = |img: &mut Vec<u8>, line: &[[f64; 2]], closed: bool, c: [u8; 3]| {
+    let draw_line = |img: &mut Vec<u8>, line: &[[f64; 2]], closed: bool, c: [u8; 3]| {
         let n = line.len();
         let segs = if closed { n } else { n.saturating_sub(1) };
         for i in 0..segs {
