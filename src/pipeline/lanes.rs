@@ -242,7 +242,7 @@ fn seg_of(items: &[Item], members: Vec<usize>) -> Seg {
 }
 
 /// Mutual-best linking of segments; returns chains of segment indices in driving order.
-fn link(segs: &[Seg], p: &Params) -> Vec<Vec<usize>> {
+fn link(segs: &[Seg], p: &Params, barriers: &[[f64; 4]]) -> Vec<Vec<usize>> {
     let n = segs.len();
     let mut order: Vec<usize> = (0..n).collect();
     order.sort_by(|&a, &b| segs[a].s0.total_cmp(&segs[b].s0).then(a.cmp(&b)));
@@ -275,6 +275,15 @@ fn link(segs: &[Seg], p: &Params) -> Vec<Vec<usize>> {
             }
             // Widths compared with 5 cm added: sparse far-range pieces under-read their
             // width by about a point spacing, which must not break a line.
+            // A barrier inside the gap (overlapping it by ≥ 0.1 m) at the line's offset.
+            let (gs0, gs1) = (sa.s1, sb.s0);
+            let om = 0.5 * (pa + pb);
+            if barriers
+                .iter()
+                .any(|b| b[0] < gs1 - 0.1 && b[1] > gs0 + 0.1 && om >= b[2] && om <= b[3])
+            {
+                continue;
+            }
             if sa.width.min(sb.width) + 0.05 < p.min_width_similarity * (sa.width.max(sb.width) + 0.05) {
                 continue;
             }
@@ -315,7 +324,30 @@ fn link(segs: &[Seg], p: &Params) -> Vec<Vec<usize>> {
 
 /// Grow lane lines from pieces. See the module docs.
 pub fn grow(pieces: &[LanePiece], traj: &Trajectory, p: &Params) -> Lanes {
+    grow_with_barriers(pieces, traj, p, &[])
+}
+
+/// [`grow`], never bridging a gap across a barrier: markings that cross the road (stop
+/// lines, crosswalks; outlines in the pieces' coordinates). A lane line does not run on
+/// through a crosswalk or past a stop line into the junction, however well the lines on
+/// both sides align.
+pub fn grow_with_barriers(pieces: &[LanePiece], traj: &Trajectory, p: &Params, barriers: &[Vec<[f64; 2]>]) -> Lanes {
     let refl = RefLine::new(traj);
+    // Barrier boxes in the trajectory frame (s0, s1, o0, o1), widened by 0.5 m across so
+    // the gaps between zebra stripes count too.
+    let boxes: Vec<[f64; 4]> = barriers
+        .iter()
+        .filter(|r| !r.is_empty())
+        .map(|r| {
+            let so: Vec<[f64; 2]> = r.iter().map(|&v| refl.locate(v)).collect();
+            let f = |k: usize, lo: bool| {
+                so.iter()
+                    .map(|q| q[k])
+                    .fold(if lo { f64::INFINITY } else { f64::NEG_INFINITY }, |a, b| if lo { a.min(b) } else { a.max(b) })
+            };
+            [f(0, true), f(0, false), f(1, true) - 0.5, f(1, false) + 0.5]
+        })
+        .collect();
     let mut items: Vec<Item> = pieces
         .iter()
         .filter(|q| {
@@ -336,12 +368,12 @@ pub fn grow(pieces: &[LanePiece], traj: &Trajectory, p: &Params) -> Lanes {
     let items = merge_overlaps(items);
     // Round 1: pieces; round 2: chains.
     let segs: Vec<Seg> = (0..items.len()).map(|i| seg_of(&items, vec![i])).collect();
-    let chains1: Vec<Vec<usize>> = link(&segs, p)
+    let chains1: Vec<Vec<usize>> = link(&segs, p, &boxes)
         .into_iter()
         .map(|c| c.into_iter().flat_map(|s| segs[s].members.clone()).collect())
         .collect();
     let segs2: Vec<Seg> = chains1.into_iter().map(|m| seg_of(&items, m)).collect();
-    let chains: Vec<Vec<usize>> = link(&segs2, p)
+    let chains: Vec<Vec<usize>> = link(&segs2, p, &boxes)
         .into_iter()
         .map(|c| c.into_iter().flat_map(|s| segs2[s].members.clone()).collect())
         .collect();

@@ -194,7 +194,12 @@ pub fn assemble(pieces: Vec<Piece>, traj_abs: &Trajectory, params: &Params) -> (
             })
         })
         .collect();
-    let lanes = lanes::grow(&lane_pieces, traj_abs, &params.lane_lines);
+    let barriers: Vec<Vec<[f64; 2]>> = pieces
+        .iter()
+        .filter(|p| matches!(p.marking.class, MarkingClass::StopLine | MarkingClass::Crosswalk))
+        .map(|p| p.marking.outline.clone())
+        .collect();
+    let lanes = lanes::grow_with_barriers(&lane_pieces, traj_abs, &params.lane_lines, &barriers);
     let mut pieces = pieces;
     for &(k, class) in &lanes.classes {
         pieces[k].marking.class = class;
