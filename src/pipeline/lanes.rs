@@ -377,6 +377,7 @@ pub fn grow_with_barriers(pieces: &[LanePiece], traj: &Trajectory, p: &Params, b
         .into_iter()
         .map(|c| c.into_iter().flat_map(|s| segs2[s].members.clone()).collect())
         .collect();
+    let chains = merge_parallel_chains(&items, chains);
     let mut out = Lanes::default();
     for mut chain in chains {
         chain.sort_by(|&a, &b| items[a].so[0][0].total_cmp(&items[b].so[0][0]).then(a.cmp(&b)));
@@ -427,6 +428,29 @@ pub fn grow_with_barriers(pieces: &[LanePiece], traj: &Trajectory, p: &Params, b
     });
     out.classes.sort_unstable_by_key(|c| c.0);
     out
+}
+
+/// Chains that run along the same painted line over a common stretch (fragments of a
+/// sparse far line linked into two interleaved chains) are one lane line: same test as
+/// `merge_overlaps`, on the chains' pooled samples.
+fn merge_parallel_chains(items: &[Item], chains: Vec<Vec<usize>>) -> Vec<Vec<usize>> {
+    let pooled: Vec<Item> = chains
+        .iter()
+        .map(|c| {
+            let mut so: Vec<[f64; 2]> = c.iter().flat_map(|&m| items[m].so.iter().copied()).collect();
+            so.sort_by(|a, b| a[0].total_cmp(&b[0]));
+            Item {
+                keys: c.clone(),
+                so,
+                width: c.iter().map(|&m| items[m].width).fold(0.0, f64::max),
+                conf: 0.0,
+            }
+        })
+        .collect();
+    // `merge_overlaps` sorts by start and concatenates `keys`, here the item indices.
+    let mut sorted = pooled;
+    sorted.sort_by(|a, b| a.so[0][0].total_cmp(&b.so[0][0]).then(a.keys.cmp(&b.keys)));
+    merge_overlaps(sorted).into_iter().map(|m| m.keys).collect()
 }
 
 /// Median offset of the samples of `so` with s in [a, b].
@@ -542,7 +566,17 @@ fn regimes(items: &[Item], chain: &[usize], p: &Params) -> Vec<(LaneLineClass, V
             lens.iter().filter(|&&l| (l - med).abs() <= 0.35 * med).count() as f64 >= 0.6 * lens.len() as f64;
         let span = runs[j].1 - runs[i].0;
         let paint = lens.iter().sum::<f64>() / span.max(1e-9);
-        if lens.len() >= p.min_dashes && regular && paint <= 0.8 {
+        // Painted dashes repeat with regular gaps too (every standard fixes the gap);
+        // a solid line broken by parked cars or shadows has irregular gaps. Gaps much
+        // longer than the median (a missing dash, an occlusion) are left out of the test.
+        let gaps: Vec<f64> = (i..j).map(|k| runs[k + 1].0 - runs[k].1).collect();
+        let regular_gaps = gaps.len() < 2 || {
+            let mut g = gaps.clone();
+            let mg = geom::median(&mut g);
+            let usable: Vec<f64> = gaps.iter().copied().filter(|&x| x <= 1.8 * mg).collect();
+            usable.iter().filter(|&&x| (x - mg).abs() <= 0.35 * mg).count() as f64 >= 0.6 * usable.len() as f64
+        };
+        if lens.len() >= p.min_dashes && regular && regular_gaps && paint <= 0.7 {
             dashed[i..=j].iter_mut().for_each(|d| *d = true);
         }
         i = j + 1;
