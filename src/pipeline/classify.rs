@@ -267,7 +267,13 @@ pub fn assess(
 }
 
 /// Features of one group of points; class left `Unknown` (rules come later).
-fn describe(xy: &[[f64; 2]], intensity: &[f32], mut idx: Vec<usize>, refl: &RefLine, p: &Params) -> Candidate {
+fn describe(
+    xy: &[[f64; 2]],
+    intensity: &[f32],
+    mut idx: Vec<usize>,
+    refl: &RefLine,
+    p: &Params,
+) -> Candidate {
     idx.sort_unstable();
     let pts: Vec<[f64; 2]> = idx.iter().map(|&i| xy[i]).collect();
     let bar = BarShape::of(&pts);
@@ -278,8 +284,10 @@ fn describe(xy: &[[f64; 2]], intensity: &[f32], mut idx: Vec<usize>, refl: &RefL
     let mean_intensity = if idx.is_empty() {
         0.0
     } else {
-        (idx.iter().map(|&i| intensity.get(i).copied().unwrap_or(0.0) as f64).sum::<f64>() / idx.len() as f64)
-            as f32
+        (idx.iter()
+            .map(|&i| intensity.get(i).copied().unwrap_or(0.0) as f64)
+            .sum::<f64>()
+            / idx.len() as f64) as f32
     };
     let shape = Shape {
         center,
@@ -370,13 +378,21 @@ fn line_geometry(pts: &[[f64; 2]], refl: &RefLine, p: &Params) -> Option<LineGeo
     }
     let angle = slope.abs().atan().to_degrees();
     // Local angles too: a piece bending across the road is not a lane line.
-    if angle > p.line_max_angle_deg || ks.iter().any(|&s| fit(s).1.abs().atan().to_degrees() > p.line_max_angle_deg + 10.0) {
+    if angle > p.line_max_angle_deg
+        || ks
+            .iter()
+            .any(|&s| fit(s).1.abs().atan().to_degrees() > p.line_max_angle_deg + 10.0)
+    {
         return None;
     }
     // Ends: the first/last points, ignoring a lone stray beyond a slice gap.
     let first = (0..ns).find(|&k| slices[k].len() >= 2).unwrap_or(0);
     let last = (0..ns).rev().find(|&k| slices[k].len() >= 2).unwrap_or(ns - 1);
-    let s0 = so.iter().map(|q| q[0]).find(|&s| s >= s_lo + first as f64 * ds).unwrap_or(s_lo);
+    let s0 = so
+        .iter()
+        .map(|q| q[0])
+        .find(|&s| s >= s_lo + first as f64 * ds)
+        .unwrap_or(s_lo);
     let s1 = so
         .iter()
         .rev()
@@ -415,7 +431,13 @@ fn line_geometry(pts: &[[f64; 2]], refl: &RefLine, p: &Params) -> Option<LineGeo
 /// something crosses the line). A track at least `solid_min_length_m` long takes every
 /// point within its half width (+3 cm) of the track's centre; the rest is re-clustered
 /// (0.25 m components) and peeled again, up to three lines. Cost: O(m log m) for m points.
-fn peel_lines(c: Candidate, xy: &[[f64; 2]], intensity: &[f32], refl: &RefLine, p: &Params) -> Vec<Candidate> {
+fn peel_lines(
+    c: Candidate,
+    xy: &[[f64; 2]],
+    intensity: &[f32],
+    refl: &RefLine,
+    p: &Params,
+) -> Vec<Candidate> {
     if c.line.is_some() || c.indices.len() < 40 {
         return vec![c];
     }
@@ -423,11 +445,15 @@ fn peel_lines(c: Candidate, xy: &[[f64; 2]], intensity: &[f32], refl: &RefLine, 
     let mut rest = c.indices;
     for _round in 0..3 {
         let so: Vec<[f64; 2]> = rest.iter().map(|&i| refl.locate(xy[i])).collect();
-        let (s_lo, s_hi) = so.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, q| (a.0.min(q[0]), a.1.max(q[0])));
+        let (s_lo, s_hi) = so.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, q| {
+            (a.0.min(q[0]), a.1.max(q[0]))
+        });
         if s_hi - s_lo < p.solid_min_length_m {
             break;
         }
-        let Some(track) = line_track(&so, s_lo, s_hi, p) else { break };
+        let Some(track) = line_track(&so, s_lo, s_hi, p) else {
+            break;
+        };
         let (mut line, mut other) = (Vec::new(), Vec::new());
         for (k, &i) in rest.iter().enumerate() {
             if track(so[k]) {
@@ -495,7 +521,8 @@ fn line_track(so: &[[f64; 2]], s_lo: f64, s_hi: f64, p: &Params) -> Option<impl 
         runs.push(r);
     }
     // DP: best[k][j] = (track length in slices, previous (k, j)).
-    let mut best: Vec<Vec<(usize, Option<(usize, usize)>)>> = runs.iter().map(|r| vec![(1, None); r.len()]).collect();
+    type Back = Option<(usize, usize)>;
+    let mut best: Vec<Vec<(usize, Back)>> = runs.iter().map(|r| vec![(1, None); r.len()]).collect();
     for k in 0..ns {
         for j in 0..runs[k].len() {
             let c = 0.5 * (runs[k][j].0 + runs[k][j].1);
@@ -569,7 +596,11 @@ struct End {
 fn piece_end(c: &Candidate, p: &Params) -> Option<End> {
     if let Some(l) = &c.line {
         let (a, b) = (l.stations[0], l.stations[l.stations.len() - 1]);
-        let slope = if b[0] - a[0] > 1e-6 { (b[1] - a[1]) / (b[0] - a[0]) } else { 0.0 };
+        let slope = if b[0] - a[0] > 1e-6 {
+            (b[1] - a[1]) / (b[0] - a[0])
+        } else {
+            0.0
+        };
         return Some(End {
             s0: a[0],
             s1: b[0],
@@ -596,7 +627,13 @@ fn piece_end(c: &Candidate, p: &Params) -> Option<End> {
 }
 
 /// Merge broken pieces of one line (mutual best successor within `join_gap_m`).
-fn rejoin(feats: Vec<Candidate>, xy: &[[f64; 2]], intensity: &[f32], refl: &RefLine, p: &Params) -> Vec<Candidate> {
+fn rejoin(
+    feats: Vec<Candidate>,
+    xy: &[[f64; 2]],
+    intensity: &[f32],
+    refl: &RefLine,
+    p: &Params,
+) -> Vec<Candidate> {
     if p.join_gap_m <= 0.0 {
         return feats;
     }
@@ -616,7 +653,9 @@ fn rejoin(feats: Vec<Candidate>, xy: &[[f64; 2]], intensity: &[f32], refl: &RefL
         let dev = (eb.o0 - pred).abs();
         let wmax = ea.width.max(eb.width).max(0.05);
         let tol = 0.5 * wmax + 0.03;
-        if dev > tol || ea.width.min(eb.width) < 0.4 * wmax && feats[a].line.is_some() && feats[b].line.is_some() {
+        if dev > tol
+            || ea.width.min(eb.width) < 0.4 * wmax && feats[a].line.is_some() && feats[b].line.is_some()
+        {
             return None;
         }
         Some(dev / tol + gap.max(0.0) / p.join_gap_m)
@@ -651,13 +690,13 @@ fn rejoin(feats: Vec<Candidate>, xy: &[[f64; 2]], intensity: &[f32], refl: &RefL
         a
     }
     let mut merged_any = false;
-    for a in 0..n {
-        if let Some((_, b)) = best_next[a] {
-            if best_prev[b].map(|x| x.1) == Some(a) {
-                let (ra, rb) = (find(&mut parent, a), find(&mut parent, b));
-                parent[ra.max(rb)] = ra.min(rb);
-                merged_any = true;
-            }
+    for (a, bn) in best_next.iter().enumerate() {
+        if let Some((_, b)) = *bn
+            && best_prev[b].map(|x| x.1) == Some(a)
+        {
+            let (ra, rb) = (find(&mut parent, a), find(&mut parent, b));
+            parent[ra.max(rb)] = ra.min(rb);
+            merged_any = true;
         }
     }
     if !merged_any {
@@ -669,7 +708,8 @@ fn rejoin(feats: Vec<Candidate>, xy: &[[f64; 2]], intensity: &[f32], refl: &RefL
         groups.entry(r).or_default().push(i);
     }
     let mut slots: Vec<Option<Candidate>> = feats.into_iter().map(Some).collect();
-    let (single, multi): (Vec<Vec<usize>>, Vec<Vec<usize>>) = groups.into_values().partition(|g| g.len() == 1);
+    let (single, multi): (Vec<Vec<usize>>, Vec<Vec<usize>>) =
+        groups.into_values().partition(|g| g.len() == 1);
     let mut out: Vec<Candidate> = single
         .into_iter()
         .map(|g| slots[g[0]].take().expect("each candidate once"))
@@ -747,7 +787,11 @@ fn rule(mut c: Candidate, p: &Params) -> (Candidate, Option<DropReason>) {
     }
     let bar = s.fill_ratio >= 0.65 && aspect >= 2.5;
     let ang = s.angle_to_trajectory_deg;
-    if bar && ang >= 60.0 && s.width_m >= p.stop_min_width_m && s.width_m <= p.stop_max_width_m && s.length_m >= 1.5
+    if bar
+        && ang >= 60.0
+        && s.width_m >= p.stop_min_width_m
+        && s.width_m <= p.stop_max_width_m
+        && s.length_m >= 1.5
     {
         c.class = MarkingClass::StopLine;
         c.confidence = 0.8 * inside(s.width_m, p.stop_min_width_m, p.stop_max_width_m);
@@ -799,7 +843,11 @@ fn confirm_groups(items: &mut [(Candidate, Option<DropReason>)]) {
     let zebra: Vec<usize> = stops
         .iter()
         .copied()
-        .filter(|&i| stops.iter().any(|&j| j != i && stripe_neighbours(&items[i].0.shape, &items[j].0.shape, 2.5)))
+        .filter(|&i| {
+            stops
+                .iter()
+                .any(|&j| j != i && stripe_neighbours(&items[i].0.shape, &items[j].0.shape, 2.5))
+        })
         .collect();
     for i in zebra {
         items[i].0.class = MarkingClass::Crosswalk;

@@ -448,7 +448,7 @@ fn find_valley(vals: &[f64], bin: f64, min_sep: f64, p: &Params) -> Option<f64> 
     s.sort_unstable_by(f64::total_cmp);
     let (lo, hi) = (s[0], s[s.len() - 1]);
     let nb = ((hi - lo) / bin).ceil() as usize + 1;
-    if nb < 5 || nb > 20_000 {
+    if !(5..=20_000).contains(&nb) {
         return None;
     }
     let mut h = vec![0.0f64; nb];
@@ -618,6 +618,7 @@ fn bar_split(pts: &[[f64; 2]], p: &Params) -> Option<Vec<Vec<usize>>> {
 }
 
 /// One bar candidate of [`bar_split`]: direction `theta`, densest window starting at bin `w0`.
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
 fn bar_split_at(
     pts: &[[f64; 2]],
     rel: &[[f64; 2]],
@@ -719,13 +720,11 @@ fn bar_split_at(
             }
         }
         let one_side = same_side as f64 >= 0.95 * part.len() as f64;
-        let perpendicular = phi >= 60.0
-            && pa - ba >= 0.3
-            && bb - pb >= 0.3
-            && (bb - ba) >= 2.5 * (pb - pa)
-            && one_side;
+        let perpendicular =
+            phi >= 60.0 && pa - ba >= 0.3 && bb - pb >= 0.3 && (bb - ba) >= 2.5 * (pb - pa) && one_side;
         // A filled stripe touching the bar at an angle (chevrons on an edge line).
-        let diagonal = phi > 20.0 && phi < 70.0 && one_side && shape.length() >= 1.0 && filled_bar(&pxy).is_some();
+        let diagonal =
+            phi > 20.0 && phi < 70.0 && one_side && shape.length() >= 1.0 && filled_bar(&pxy).is_some();
         // A long line takes nothing with it: whatever touches it is another object.
         if long || parallel || perpendicular || diagonal {
             out.push(part);

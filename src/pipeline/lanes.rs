@@ -298,12 +298,12 @@ fn link(segs: &[Seg], p: &Params, barriers: &[[f64; 4]]) -> Vec<Vec<usize>> {
     }
     let mut next: Vec<Option<usize>> = vec![None; n];
     let mut has_prev = vec![false; n];
-    for a in 0..n {
-        if let Some((_, b)) = best_next[a] {
-            if best_prev[b].map(|x| x.1) == Some(a) {
-                next[a] = Some(b);
-                has_prev[b] = true;
-            }
+    for (a, bn) in best_next.iter().enumerate() {
+        if let Some((_, b)) = *bn
+            && best_prev[b].map(|x| x.1) == Some(a)
+        {
+            next[a] = Some(b);
+            has_prev[b] = true;
         }
     }
     let mut chains = Vec::new();
@@ -331,7 +331,12 @@ pub fn grow(pieces: &[LanePiece], traj: &Trajectory, p: &Params) -> Lanes {
 /// lines, crosswalks; outlines in the pieces' coordinates). A lane line does not run on
 /// through a crosswalk or past a stop line into the junction, however well the lines on
 /// both sides align.
-pub fn grow_with_barriers(pieces: &[LanePiece], traj: &Trajectory, p: &Params, barriers: &[Vec<[f64; 2]>]) -> Lanes {
+pub fn grow_with_barriers(
+    pieces: &[LanePiece],
+    traj: &Trajectory,
+    p: &Params,
+    barriers: &[Vec<[f64; 2]>],
+) -> Lanes {
     let refl = RefLine::new(traj);
     // Barrier boxes in the trajectory frame (s0, s1, o0, o1), widened by 0.5 m across so
     // the gaps between zebra stripes count too.
@@ -343,7 +348,9 @@ pub fn grow_with_barriers(pieces: &[LanePiece], traj: &Trajectory, p: &Params, b
             let f = |k: usize, lo: bool| {
                 so.iter()
                     .map(|q| q[k])
-                    .fold(if lo { f64::INFINITY } else { f64::NEG_INFINITY }, |a, b| if lo { a.min(b) } else { a.max(b) })
+                    .fold(if lo { f64::INFINITY } else { f64::NEG_INFINITY }, |a, b| {
+                        if lo { a.min(b) } else { a.max(b) }
+                    })
             };
             [f(0, true), f(0, false), f(1, true) - 0.5, f(1, false) + 0.5]
         })
@@ -416,7 +423,10 @@ pub fn grow_with_barriers(pieces: &[LanePiece], traj: &Trajectory, p: &Params, b
                 length_m: geom::polyline_length(&line),
                 line,
                 confidence: (mean_conf * (0.6 + 0.4 * support) * (0.5 + 0.5 * fit)).clamp(0.0, 1.0),
-                pieces: members.iter().flat_map(|&m| items[m].keys.iter().copied()).collect(),
+                pieces: members
+                    .iter()
+                    .flat_map(|&m| items[m].keys.iter().copied())
+                    .collect(),
                 start,
             });
         }
@@ -455,7 +465,11 @@ fn merge_parallel_chains(items: &[Item], chains: Vec<Vec<usize>>) -> Vec<Vec<usi
 
 /// Median offset of the samples of `so` with s in [a, b].
 fn median_offset_in(so: &[[f64; 2]], a: f64, b: f64) -> Option<f64> {
-    let mut v: Vec<f64> = so.iter().filter(|q| q[0] >= a && q[0] <= b).map(|q| q[1]).collect();
+    let mut v: Vec<f64> = so
+        .iter()
+        .filter(|q| q[0] >= a && q[0] <= b)
+        .map(|q| q[1])
+        .collect();
     (!v.is_empty()).then(|| geom::median(&mut v))
 }
 
@@ -488,8 +502,10 @@ fn merge_overlaps(items: Vec<Item>) -> Vec<Item> {
             if ov < 0.5_f64.min(0.5 * (a1 - a0).min(b1 - b0)) {
                 continue;
             }
-            let (Some(oa), Some(ob)) = (median_offset_in(&items[i].so, lo, hi), median_offset_in(&items[j].so, lo, hi))
-            else {
+            let (Some(oa), Some(ob)) = (
+                median_offset_in(&items[i].so, lo, hi),
+                median_offset_in(&items[j].so, lo, hi),
+            ) else {
                 continue;
             };
             if (oa - ob).abs() < 0.5 * items[i].width.max(items[j].width) + 0.05 {
@@ -505,9 +521,9 @@ fn merge_overlaps(items: Vec<Item>) -> Vec<Item> {
     let mut slots: Vec<Option<Item>> = items.into_iter().map(Some).collect();
     let mut out: Vec<Item> = Vec::new();
     let mut at: Vec<Option<usize>> = vec![None; n];
-    for i in 0..n {
+    for (i, slot) in slots.iter_mut().enumerate() {
         let r = find(&mut parent, i);
-        let it = slots[i].take().expect("each item once");
+        let it = slot.take().expect("each item once");
         match at[r] {
             None => {
                 at[r] = Some(out.len());
@@ -574,7 +590,8 @@ fn regimes(items: &[Item], chain: &[usize], p: &Params) -> Vec<(LaneLineClass, V
             let mut g = gaps.clone();
             let mg = geom::median(&mut g);
             let usable: Vec<f64> = gaps.iter().copied().filter(|&x| x <= 1.8 * mg).collect();
-            usable.iter().filter(|&&x| (x - mg).abs() <= 0.35 * mg).count() as f64 >= 0.6 * usable.len() as f64
+            usable.iter().filter(|&&x| (x - mg).abs() <= 0.35 * mg).count() as f64
+                >= 0.6 * usable.len() as f64
         };
         if lens.len() >= p.min_dashes && regular && regular_gaps && paint <= 0.7 {
             dashed[i..=j].iter_mut().for_each(|d| *d = true);

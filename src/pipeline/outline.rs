@@ -72,7 +72,8 @@ pub fn convex_hull(pts: &[[f64; 2]]) -> Vec<[f64; 2]> {
     if p.len() < 3 {
         return p;
     }
-    let cross = |o: [f64; 2], a: [f64; 2], b: [f64; 2]| (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]);
+    let cross =
+        |o: [f64; 2], a: [f64; 2], b: [f64; 2]| (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]);
     let mut hull: Vec<[f64; 2]> = Vec::with_capacity(2 * p.len());
     for &q in &p {
         while hull.len() >= 2 && cross(hull[hull.len() - 2], hull[hull.len() - 1], q) <= 0.0 {
@@ -96,7 +97,11 @@ pub fn convex_hull(pts: &[[f64; 2]]) -> Vec<[f64; 2]> {
 /// vertices of that piece. None when no triangle survives (too few or collinear points, or
 /// R too small).
 pub fn alpha_shape(pts: &[[f64; 2]], radius: f64) -> Option<(Vec<[f64; 2]>, f64)> {
-    let mut uniq: Vec<[f64; 2]> = pts.iter().copied().filter(|p| p[0].is_finite() && p[1].is_finite()).collect();
+    let mut uniq: Vec<[f64; 2]> = pts
+        .iter()
+        .copied()
+        .filter(|p| p[0].is_finite() && p[1].is_finite())
+        .collect();
     uniq.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
     uniq.dedup();
     if uniq.len() < 3 {
@@ -170,7 +175,9 @@ pub fn alpha_shape(pts: &[[f64; 2]], radius: f64) -> Option<(Vec<[f64; 2]>, f64)
         for e in f.adjacent_edges() {
             let other_kept = e.rev().face().as_inner().is_some_and(|o| kept[o.fix().index()]);
             if !other_kept {
-                next.entry(e.from().fix().index()).or_default().push(e.to().fix().index());
+                next.entry(e.from().fix().index())
+                    .or_default()
+                    .push(e.to().fix().index());
                 nedges += 1;
             }
         }
@@ -193,8 +200,7 @@ pub fn alpha_shape(pts: &[[f64; 2]], radius: f64) -> Option<(Vec<[f64; 2]>, f64)
         while next.get(&s).is_some_and(|v| !v.is_empty()) {
             let mut ring = vec![positions[s]];
             let mut cur = s;
-            loop {
-                let Some(list) = next.get_mut(&cur) else { break };
+            while let Some(list) = next.get_mut(&cur) {
                 let Some(nx) = list.pop() else { break };
                 if nx == s {
                     break;
@@ -223,10 +229,10 @@ pub fn alpha_shape(pts: &[[f64; 2]], radius: f64) -> Option<(Vec<[f64; 2]>, f64)
 pub fn irregular(pts: &[[f64; 2]], spacing: f64) -> Vec<[f64; 2]> {
     let mut r = (3.0 * spacing).max(0.15);
     for _ in 0..4 {
-        if let Some((ring, frac)) = alpha_shape(pts, r) {
-            if frac >= 0.95 {
-                return ring;
-            }
+        if let Some((ring, frac)) = alpha_shape(pts, r)
+            && frac >= 0.95
+        {
+            return ring;
         }
         r *= 2.0;
     }
@@ -263,10 +269,16 @@ pub fn buffered_line(line: &[[f64; 2]], half_width: f64) -> Vec<[f64; 2]> {
         .collect();
     let mut ring: Vec<[f64; 2]> = Vec::with_capacity(2 * n);
     for i in 0..n {
-        ring.push([line[i][0] - normals[i][0] * half_width, line[i][1] - normals[i][1] * half_width]);
+        ring.push([
+            line[i][0] - normals[i][0] * half_width,
+            line[i][1] - normals[i][1] * half_width,
+        ]);
     }
     for i in (0..n).rev() {
-        ring.push([line[i][0] + normals[i][0] * half_width, line[i][1] + normals[i][1] * half_width]);
+        ring.push([
+            line[i][0] + normals[i][0] * half_width,
+            line[i][1] + normals[i][1] * half_width,
+        ]);
     }
     ring
 }

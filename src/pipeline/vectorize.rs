@@ -90,7 +90,13 @@ pub struct Piece {
 /// Heading in degrees clockwise from north of direction `d` (x east, y north), in [0, 360).
 pub fn heading_deg(d: [f64; 2]) -> f64 {
     let h = d[0].atan2(d[1]).to_degrees();
-    if h < 0.0 { h + 360.0 } else if h >= 360.0 { h - 360.0 } else { h }
+    if h < 0.0 {
+        h + 360.0
+    } else if h >= 360.0 {
+        h - 360.0
+    } else {
+        h
+    }
 }
 
 /// Outline every candidate (see the module docs).
@@ -118,7 +124,13 @@ pub fn outlines(cloud: &PointCloud, candidates: &[Candidate], params: &Params) -
                         let ring = outline::buffered_line(&simple, l.width_m / 2.0);
                         (ring, l.length_m, l.width_m, heading_deg(chord), Some(cl))
                     } else {
-                        (s.corners().to_vec(), s.length_m, s.width_m, heading_deg(along), Some(cl))
+                        (
+                            s.corners().to_vec(),
+                            s.length_m,
+                            s.width_m,
+                            heading_deg(along),
+                            Some(cl),
+                        )
                     }
                 }
                 MarkingClass::StopLine => {
@@ -130,9 +142,16 @@ pub fn outlines(cloud: &PointCloud, candidates: &[Candidate], params: &Params) -
                     };
                     (s.corners().to_vec(), s.length_m, s.width_m, heading_deg(d), None)
                 }
-                MarkingClass::Crosswalk | MarkingClass::Guideline | MarkingClass::DashedLine | MarkingClass::SolidLine => {
-                    (s.corners().to_vec(), s.length_m, s.width_m, heading_deg(along), None)
-                }
+                MarkingClass::Crosswalk
+                | MarkingClass::Guideline
+                | MarkingClass::DashedLine
+                | MarkingClass::SolidLine => (
+                    s.corners().to_vec(),
+                    s.length_m,
+                    s.width_m,
+                    heading_deg(along),
+                    None,
+                ),
                 _ => {
                     let pts: Vec<[f64; 2]> = c.indices.iter().map(|&i| [cloud.x[i], cloud.y[i]]).collect();
                     let mut ring = outline::irregular(&pts, s.spacing_m);
@@ -224,7 +243,10 @@ pub fn assemble(pieces: Vec<Piece>, traj_abs: &Trajectory, params: &Params) -> (
     order.sort_by(|a, b| {
         a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)).then_with(|| {
             let (p, q) = (&pieces[a.2].marking.outline, &pieces[b.2].marking.outline);
-            let (p0, q0) = (p.first().copied().unwrap_or([0.0; 2]), q.first().copied().unwrap_or([0.0; 2]));
+            let (p0, q0) = (
+                p.first().copied().unwrap_or([0.0; 2]),
+                q.first().copied().unwrap_or([0.0; 2]),
+            );
             p0[0].total_cmp(&q0[0]).then(p0[1].total_cmp(&q0[1]))
         })
     });
