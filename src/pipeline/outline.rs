@@ -283,9 +283,59 @@ pub fn buffered_line(line: &[[f64; 2]], half_width: f64) -> Vec<[f64; 2]> {
     ring
 }
 
+/// True when the closed ring (not repeated first vertex) has no two non-adjacent edges
+/// that touch or cross: a valid simple polygon boundary. O(n²) over the n edges (outlines
+/// have tens to a few hundred vertices).
+pub fn is_simple(ring: &[[f64; 2]]) -> bool {
+    let n = ring.len();
+    if n < 3 {
+        return false;
+    }
+    let orient =
+        |a: [f64; 2], b: [f64; 2], c: [f64; 2]| (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+    let on_seg = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| {
+        c[0] >= a[0].min(b[0]) && c[0] <= a[0].max(b[0]) && c[1] >= a[1].min(b[1]) && c[1] <= a[1].max(b[1])
+    };
+    let cross = |p1: [f64; 2], p2: [f64; 2], q1: [f64; 2], q2: [f64; 2]| {
+        let (d1, d2) = (orient(q1, q2, p1), orient(q1, q2, p2));
+        let (d3, d4) = (orient(p1, p2, q1), orient(p1, p2, q2));
+        if ((d1 > 0.0 && d2 < 0.0) || (d1 < 0.0 && d2 > 0.0))
+            && ((d3 > 0.0 && d4 < 0.0) || (d3 < 0.0 && d4 > 0.0))
+        {
+            return true;
+        }
+        (d1 == 0.0 && on_seg(q1, q2, p1))
+            || (d2 == 0.0 && on_seg(q1, q2, p2))
+            || (d3 == 0.0 && on_seg(p1, p2, q1))
+            || (d4 == 0.0 && on_seg(p1, p2, q2))
+    };
+    for i in 0..n {
+        let (a, b) = (ring[i], ring[(i + 1) % n]);
+        for j in i + 2..n {
+            if i == 0 && j == n - 1 {
+                continue; // adjacent through the closing edge
+            }
+            if cross(a, b, ring[j], ring[(j + 1) % n]) {
+                return false;
+            }
+        }
+    }
+    true
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn simple_rings_are_told_from_self_intersecting_ones() {
+        assert!(is_simple(&[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]));
+        // Bow tie.
+        assert!(!is_simple(&[[0.0, 0.0], [1.0, 1.0], [1.0, 0.0], [0.0, 1.0]]));
+        // Touching itself at a vertex.
+        assert!(!is_simple(&[[0.0, 0.0], [2.0, 0.0], [1.0, 0.0], [1.0, 1.0]]));
+        assert!(!is_simple(&[[0.0, 0.0], [1.0, 0.0]]));
+    }
 
     #[test]
     fn degenerate_inputs() {

@@ -170,6 +170,17 @@ pub fn outlines(cloud: &PointCloud, candidates: &[Candidate], params: &Params) -
                     (ring, s.length_m, s.width_m, heading_deg(along), None)
                 }
             };
+            // A self-intersecting ring (a buffered centreline folding on a tight bend, an
+            // alpha shape pinched at a vertex) is no valid polygon: the convex hull of its
+            // vertices stands in.
+            let mut ring = ring;
+            ring.dedup();
+            if ring.len() > 1 && ring[0] == ring[ring.len() - 1] {
+                ring.pop();
+            }
+            if !outline::is_simple(&ring) {
+                ring = outline::convex_hull(&ring);
+            }
             // A degenerate outline (a cluster collapsed to a line or a point) is no painted
             // object: it would be an invalid GeoJSON polygon, so it is dropped here.
             let mut distinct = ring.clone();
