@@ -247,6 +247,12 @@ pub fn assess(
         .into_par_iter()
         .map(|g| describe(&xy, &cloud.intensity, g, &refl, params))
         .collect();
+    // Long clusters that failed the line test: a line with something attached (gore
+    // chevrons, an arrow, a second line of a double line). Peel the lines off.
+    let feats: Vec<Candidate> = feats
+        .into_par_iter()
+        .flat_map_iter(|c| peel_lines(c, &xy, &cloud.intensity, &refl, params))
+        .collect();
     let feats = rejoin(feats, &xy, &cloud.intensity, &refl, params);
     let mut out: Vec<(Candidate, Option<DropReason>)> = feats.into_iter().map(|c| rule(c, params)).collect();
     confirm_groups(&mut out);
@@ -261,7 +267,13 @@ pub fn assess(
 }
 
 /// Features of one group of points; class left `Unknown` (rules come later).
-fn describe(xy: &[[f64; 2]], intensity: &[f32], mut idx: Vec<usize>, refl: &RefLine, p: &Params) -> Candidate {
+fn describe(
+    xy: &[[f64; 2]],
+    intensity: &[f32],
+    mut idx: Vec<usize>,
+    refl: &RefLine,
+    p: &Params,
+) -> Candidate {
     idx.sort_unstable();
     let pts: Vec<[f64; 2]> = idx.iter().map(|&i| xy[i]).collect();
     let bar = BarShape::of(&pts);
@@ -272,8 +284,10 @@ fn describe(xy: &[[f64; 2]], intensity: &[f32], mut idx: Vec<usize>, refl: &RefL
     let mean_intensity = if idx.is_empty() {
         0.0
     } else {
-        (idx.iter().map(|&i| intensity.get(i).copied().unwrap_or(0.0) as f64).sum::<f64>() / idx.len() as f64)
-            as f32
+        (idx.iter()
+            .map(|&i| intensity.get(i).copied().unwrap_or(0.0) as f64)
+            .sum::<f64>()
+            / idx.len() as f64) as f32
     };
     let shape = Shape {
         center,
@@ -364,13 +378,21 @@ fn line_geometry(pts: &[[f64; 2]], refl: &RefLine, p: &Params) -> Option<LineGeo
     }
     let angle = slope.abs().atan().to_degrees();
     // Local angles too: a piece bending across the road is not a lane line.
-    if angle > p.line_max_angle_deg || ks.iter().any(|&s| fit(s).1.abs().atan().to_degrees() > p.line_max_angle_deg + 10.0) {
+    if angle > p.line_max_angle_deg
+        || ks
+            .iter()
+            .any(|&s| fit(s).1.abs().atan().to_degrees() > p.line_max_angle_deg + 10.0)
+    {
         return None;
     }
     // Ends: the first/last points, ignoring a lone stray beyond a slice gap.
     let first = (0..ns).find(|&k| slices[k].len() >= 2).unwrap_or(0);
     let last = (0..ns).rev().find(|&k| slices[k].len() >= 2).unwrap_or(ns - 1);
-    let s0 = so.iter().map(|q| q[0]).find(|&s| s >= s_lo + first as f64 * ds).unwrap_or(s_lo);
+    let s0 = so
+        .iter()
+        .map(|q| q[0])
+        .find(|&s| s >= s_lo + first as f64 * ds)
+        .unwrap_or(s_lo);
     let s1 = so
         .iter()
         .rev()
@@ -401,6 +423,166 @@ fn line_geometry(pts: &[[f64; 2]], refl: &RefLine, p: &Params) -> Option<LineGeo
     })
 }
 
+/// Split painted lines off a long cluster that is not one line (see `assess`): in the
+/// trajectory frame, per 0.5 m mileage slice, the offsets form runs (intervals without a
+/// gap > 0.1 m or 1.5 point spacings); a dynamic programme over the slices finds the
+/// longest track of line-wide runs (≤ `line_max_width_m`) with near-constant offset
+/// (≤ 0.1 m + 0.02 m per skipped slice from one to the next, up to 4 slices skipped where
+/// something crosses the line). A track at least `solid_min_length_m` long takes every
+/// point within its half width (+3 cm) of the track's centre; the rest is re-clustered
+/// (0.25 m components) and peeled again, up to three lines. Cost: O(m log m) for m points.
+fn peel_lines(
+    c: Candidate,
+    xy: &[[f64; 2]],
+    intensity: &[f32],
+    refl: &RefLine,
+    p: &Params,
+) -> Vec<Candidate> {
+    if c.line.is_some() || c.indices.len() < 40 {
+        return vec![c];
+    }
+    let mut out = Vec::new();
+    let mut rest = c.indices;
+    for _round in 0..3 {
+        let so: Vec<[f64; 2]> = rest.iter().map(|&i| refl.locate(xy[i])).collect();
+        let (s_lo, s_hi) = so.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, q| {
+            (a.0.min(q[0]), a.1.max(q[0]))
+        });
+        if s_hi - s_lo < p.solid_min_length_m {
+            break;
+        }
+        let Some(track) = line_track(&so, s_lo, s_hi, p) else {
+            break;
+        };
+        let (mut line, mut other) = (Vec::new(), Vec::new());
+        for (k, &i) in rest.iter().enumerate() {
+            if track(so[k]) {
+                line.push(i);
+            } else {
+                other.push(i);
+            }
+        }
+        if line.len() < 20 {
+            break;
+        }
+        let cand = describe(xy, intensity, line, refl, p);
+        if cand.line.is_none() {
+            // Not a clean line after all: keep the cluster as it was.
+            other.extend(cand.indices);
+            rest = other;
+            break;
+        }
+        out.push(cand);
+        rest = other;
+    }
+    if out.is_empty() {
+        return vec![describe(xy, intensity, rest, refl, p)];
+    }
+    let pts: Vec<[f64; 2]> = rest.iter().map(|&i| xy[i]).collect();
+    for comp in geom::components(&pts, 0.25) {
+        let idx: Vec<usize> = comp.into_iter().map(|k| rest[k]).collect();
+        out.push(describe(xy, intensity, idx, refl, p));
+    }
+    out
+}
+
+/// The longest line track through the (s, o) samples (see `peel_lines`): a membership test.
+fn line_track(so: &[[f64; 2]], s_lo: f64, s_hi: f64, p: &Params) -> Option<impl Fn([f64; 2]) -> bool> {
+    const DS: f64 = 0.5;
+    const MAX_SKIP: usize = 4;
+    let ns = ((s_hi - s_lo) / DS).ceil() as usize + 1;
+    let mut slices: Vec<Vec<f64>> = vec![Vec::new(); ns];
+    for q in so {
+        slices[(((q[0] - s_lo) / DS) as usize).min(ns - 1)].push(q[1]);
+    }
+    // Runs per slice: (lo, hi, count).
+    let mut runs: Vec<Vec<(f64, f64, usize)>> = Vec::with_capacity(ns);
+    for sl in &mut slices {
+        sl.sort_unstable_by(f64::total_cmp);
+        let mut r: Vec<(f64, f64, usize)> = Vec::new();
+        // Gap threshold from the slice's own sampling: sparse lines stay one run.
+        let n = sl.len();
+        let gap = if n >= 2 {
+            let mut d: Vec<f64> = sl.windows(2).map(|w| w[1] - w[0]).collect();
+            (1.5 * geom::median(&mut d)).clamp(0.1, 0.2)
+        } else {
+            0.1
+        };
+        for &o in sl.iter() {
+            match r.last_mut() {
+                Some(l) if o - l.1 <= gap => {
+                    l.1 = o;
+                    l.2 += 1;
+                }
+                _ => r.push((o, o, 1)),
+            }
+        }
+        r.retain(|q| q.1 - q.0 <= p.line_max_width_m);
+        runs.push(r);
+    }
+    // DP: best[k][j] = (track length in slices, previous (k, j)).
+    type Back = Option<(usize, usize)>;
+    let mut best: Vec<Vec<(usize, Back)>> = runs.iter().map(|r| vec![(1, None); r.len()]).collect();
+    for k in 0..ns {
+        for j in 0..runs[k].len() {
+            let c = 0.5 * (runs[k][j].0 + runs[k][j].1);
+            let mut b = (1usize, None);
+            for back in 1..=MAX_SKIP + 1 {
+                if back > k {
+                    break;
+                }
+                let kk = k - back;
+                for (jj, r) in runs[kk].iter().enumerate() {
+                    let cc = 0.5 * (r.0 + r.1);
+                    if (c - cc).abs() <= 0.1 + 0.02 * (back - 1) as f64 && best[kk][jj].0 + 1 > b.0 {
+                        b = (best[kk][jj].0 + 1, Some((kk, jj)));
+                    }
+                }
+            }
+            best[k][j] = b;
+        }
+    }
+    let (mut k, mut j) = (0..ns)
+        .flat_map(|k| (0..runs[k].len()).map(move |j| (k, j)))
+        .max_by(|a, b| best[a.0][a.1].0.cmp(&best[b.0][b.1].0).then(b.cmp(a)))?;
+    let mut path: Vec<(f64, f64, f64)> = Vec::new(); // (s centre, o centre, width)
+    loop {
+        let r = runs[k][j];
+        path.push((s_lo + (k as f64 + 0.5) * DS, 0.5 * (r.0 + r.1), r.1 - r.0));
+        match best[k][j].1 {
+            Some((kk, jj)) => {
+                k = kk;
+                j = jj;
+            }
+            None => break,
+        }
+    }
+    path.reverse();
+    let (t0, t1) = (path[0].0 - DS / 2.0, path[path.len() - 1].0 + DS / 2.0);
+    if t1 - t0 < p.solid_min_length_m {
+        return None;
+    }
+    let mut ws: Vec<f64> = path.iter().map(|q| q.2).collect();
+    let half = geom::median(&mut ws) / 2.0 + 0.03;
+    let ps: Vec<f64> = path.iter().map(|q| q.0).collect();
+    let po: Vec<f64> = path.iter().map(|q| q.1).collect();
+    Some(move |q: [f64; 2]| {
+        if q[0] < t0 || q[0] > t1 {
+            return false;
+        }
+        let i = ps.partition_point(|&s| s < q[0]);
+        let c = if i == 0 {
+            po[0]
+        } else if i >= ps.len() {
+            po[ps.len() - 1]
+        } else {
+            let f = (q[0] - ps[i - 1]) / (ps[i] - ps[i - 1]).max(1e-9);
+            po[i - 1] + f * (po[i] - po[i - 1])
+        };
+        (q[1] - c).abs() <= half
+    })
+}
+
 /// Summary of a piece for re-joining: ends and offsets in the trajectory frame.
 struct End {
     s0: f64,
@@ -414,7 +596,11 @@ struct End {
 fn piece_end(c: &Candidate, p: &Params) -> Option<End> {
     if let Some(l) = &c.line {
         let (a, b) = (l.stations[0], l.stations[l.stations.len() - 1]);
-        let slope = if b[0] - a[0] > 1e-6 { (b[1] - a[1]) / (b[0] - a[0]) } else { 0.0 };
+        let slope = if b[0] - a[0] > 1e-6 {
+            (b[1] - a[1]) / (b[0] - a[0])
+        } else {
+            0.0
+        };
         return Some(End {
             s0: a[0],
             s1: b[0],
@@ -441,7 +627,13 @@ fn piece_end(c: &Candidate, p: &Params) -> Option<End> {
 }
 
 /// Merge broken pieces of one line (mutual best successor within `join_gap_m`).
-fn rejoin(feats: Vec<Candidate>, xy: &[[f64; 2]], intensity: &[f32], refl: &RefLine, p: &Params) -> Vec<Candidate> {
+fn rejoin(
+    feats: Vec<Candidate>,
+    xy: &[[f64; 2]],
+    intensity: &[f32],
+    refl: &RefLine,
+    p: &Params,
+) -> Vec<Candidate> {
     if p.join_gap_m <= 0.0 {
         return feats;
     }
@@ -461,7 +653,9 @@ fn rejoin(feats: Vec<Candidate>, xy: &[[f64; 2]], intensity: &[f32], refl: &RefL
         let dev = (eb.o0 - pred).abs();
         let wmax = ea.width.max(eb.width).max(0.05);
         let tol = 0.5 * wmax + 0.03;
-        if dev > tol || ea.width.min(eb.width) < 0.4 * wmax && feats[a].line.is_some() && feats[b].line.is_some() {
+        if dev > tol
+            || ea.width.min(eb.width) < 0.4 * wmax && feats[a].line.is_some() && feats[b].line.is_some()
+        {
             return None;
         }
         Some(dev / tol + gap.max(0.0) / p.join_gap_m)
@@ -496,13 +690,13 @@ fn rejoin(feats: Vec<Candidate>, xy: &[[f64; 2]], intensity: &[f32], refl: &RefL
         a
     }
     let mut merged_any = false;
-    for a in 0..n {
-        if let Some((_, b)) = best_next[a] {
-            if best_prev[b].map(|x| x.1) == Some(a) {
-                let (ra, rb) = (find(&mut parent, a), find(&mut parent, b));
-                parent[ra.max(rb)] = ra.min(rb);
-                merged_any = true;
-            }
+    for (a, bn) in best_next.iter().enumerate() {
+        if let Some((_, b)) = *bn
+            && best_prev[b].map(|x| x.1) == Some(a)
+        {
+            let (ra, rb) = (find(&mut parent, a), find(&mut parent, b));
+            parent[ra.max(rb)] = ra.min(rb);
+            merged_any = true;
         }
     }
     if !merged_any {
@@ -514,7 +708,8 @@ fn rejoin(feats: Vec<Candidate>, xy: &[[f64; 2]], intensity: &[f32], refl: &RefL
         groups.entry(r).or_default().push(i);
     }
     let mut slots: Vec<Option<Candidate>> = feats.into_iter().map(Some).collect();
-    let (single, multi): (Vec<Vec<usize>>, Vec<Vec<usize>>) = groups.into_values().partition(|g| g.len() == 1);
+    let (single, multi): (Vec<Vec<usize>>, Vec<Vec<usize>>) =
+        groups.into_values().partition(|g| g.len() == 1);
     let mut out: Vec<Candidate> = single
         .into_iter()
         .map(|g| slots[g[0]].take().expect("each candidate once"))
@@ -552,15 +747,20 @@ fn rule(mut c: Candidate, p: &Params) -> (Candidate, Option<DropReason>) {
     }
     let aspect = s.length_m / s.width_m.max(1e-3);
     if let Some(l) = &c.line {
-        // Narrower than any painted line: a sliver or a single row of points.
-        if l.width_m < 0.05 {
+        // Sparse far-range paint is sampled by one or two points per scan line, so the
+        // measured extent of the residuals under-reads the painted width by about one point
+        // spacing: a line is judged by extent + spacing (capped, so scattered noise is not
+        // made wide).
+        let eff_width = l.width_m + s.spacing_m.min(0.1);
+        // Narrower than any painted line even so: a sliver or a single row of points.
+        if eff_width < 0.05 {
             c.class = MarkingClass::Unknown;
             c.confidence = 0.2;
             return (c, None);
         }
         if l.width_m <= p.line_max_width_m {
-            let ratio = l.length_m / l.width_m.max(0.05);
-            let wq = inside(l.width_m, 0.06, p.line_max_width_m);
+            let ratio = l.length_m / eff_width.max(0.05);
+            let wq = inside(eff_width.min(p.line_max_width_m), 0.06, p.line_max_width_m);
             let stripe = l.width_m >= p.crosswalk_min_width_m
                 && l.width_m <= p.crosswalk_max_width_m
                 && (1.5..=10.0).contains(&l.length_m);
@@ -587,7 +787,11 @@ fn rule(mut c: Candidate, p: &Params) -> (Candidate, Option<DropReason>) {
     }
     let bar = s.fill_ratio >= 0.65 && aspect >= 2.5;
     let ang = s.angle_to_trajectory_deg;
-    if bar && ang >= 60.0 && s.width_m >= p.stop_min_width_m && s.width_m <= p.stop_max_width_m && s.length_m >= 1.5
+    if bar
+        && ang >= 60.0
+        && s.width_m >= p.stop_min_width_m
+        && s.width_m <= p.stop_max_width_m
+        && s.length_m >= 1.5
     {
         c.class = MarkingClass::StopLine;
         c.confidence = 0.8 * inside(s.width_m, p.stop_min_width_m, p.stop_max_width_m);
@@ -617,9 +821,38 @@ fn rule(mut c: Candidate, p: &Params) -> (Candidate, Option<DropReason>) {
     (c, None)
 }
 
+/// Two stripes of one group: centres ≤ `max_d` apart, parallel, similar size, side by side
+/// (not one after the other).
+fn stripe_neighbours(a: &Shape, b: &Shape, max_d: f64) -> bool {
+    (a.center[0] - b.center[0]).hypot(a.center[1] - b.center[1]) <= max_d
+        && geom::acute_angle_deg(a.axis, b.axis) <= 10.0
+        && a.width_m.min(b.width_m) >= 0.6 * a.width_m.max(b.width_m)
+        && a.length_m.min(b.length_m) >= 0.5 * a.length_m.max(b.length_m)
+        && ((b.center[0] - a.center[0]) * a.axis[0] + (b.center[1] - a.center[1]) * a.axis[1]).abs()
+            <= 0.5 * a.length_m.max(b.length_m)
+}
+
 /// Crosswalk and guideline stripes need a parallel neighbour of similar size; lone ones
 /// become `unknown` (or noise when steep).
 fn confirm_groups(items: &mut [(Candidate, Option<DropReason>)]) {
+    // Zebra stripes across a side street run across the trajectory and look like stop
+    // lines one by one; a stop line never has a parallel bar of its size beside it.
+    let stops: Vec<usize> = (0..items.len())
+        .filter(|&i| items[i].1.is_none() && items[i].0.class == MarkingClass::StopLine)
+        .collect();
+    let zebra: Vec<usize> = stops
+        .iter()
+        .copied()
+        .filter(|&i| {
+            stops
+                .iter()
+                .any(|&j| j != i && stripe_neighbours(&items[i].0.shape, &items[j].0.shape, 2.5))
+        })
+        .collect();
+    for i in zebra {
+        items[i].0.class = MarkingClass::Crosswalk;
+        items[i].0.confidence = 0.75;
+    }
     let kinds = [MarkingClass::Crosswalk, MarkingClass::Guideline];
     let mut verdict: Vec<Option<bool>> = vec![None; items.len()];
     for kind in kinds {
@@ -629,17 +862,9 @@ fn confirm_groups(items: &mut [(Candidate, Option<DropReason>)]) {
         let max_d = if kind == MarkingClass::Crosswalk { 2.5 } else { 6.0 };
         for &i in &idx {
             let a = &items[i].0.shape;
-            let ok = idx.iter().any(|&j| {
-                let b = &items[j].0.shape;
-                j != i
-                    && (a.center[0] - b.center[0]).hypot(a.center[1] - b.center[1]) <= max_d
-                    && geom::acute_angle_deg(a.axis, b.axis) <= 10.0
-                    && a.width_m.min(b.width_m) >= 0.6 * a.width_m.max(b.width_m)
-                    && a.length_m.min(b.length_m) >= 0.5 * a.length_m.max(b.length_m)
-                    // side by side, not one after the other
-                    && ((b.center[0] - a.center[0]) * a.axis[0] + (b.center[1] - a.center[1]) * a.axis[1]).abs()
-                        <= 0.5 * a.length_m.max(b.length_m)
-            });
+            let ok = idx
+                .iter()
+                .any(|&j| j != i && stripe_neighbours(a, &items[j].0.shape, max_d));
             verdict[i] = Some(ok);
         }
     }

@@ -406,7 +406,10 @@ fn valley_split(pts: &[[f64; 2]], p: &Params) -> Option<Vec<Vec<usize>>> {
             sw.push(c);
         }
     }
-    let h = (len / 10.0).max(2.0);
+    // The bandwidth stays short on long clusters: a local linear fit over tens of metres
+    // of a curved line is biased by decimetres (≈ h²/2R), which smears the residuals of ONE
+    // line into two false modes.
+    let h = (len / 10.0).clamp(2.0, 5.0);
     let centre: Vec<f64> = (0..ns)
         .map(|k| {
             let u = umin + (k as f64 + 0.5) * DS;
@@ -422,7 +425,9 @@ fn valley_split(pts: &[[f64; 2]], p: &Params) -> Option<Vec<Vec<usize>>> {
             q[1] - (centre[k] + (f - k as f64) * (centre[k1] - centre[k]))
         })
         .collect();
-    if let Some(cut) = find_valley(&resid, 0.02, 0.12, p) {
+    // Modes ≥ 0.2 m apart: two painted lines side by side (centre to centre ≥ 0.25 m for
+    // 0.1 m lines 0.15 m apart); closer modes are the scan pattern inside one line.
+    if let Some(cut) = find_valley(&resid, 0.02, 0.2, p) {
         let (a, b): (Vec<usize>, Vec<usize>) = (0..pts.len()).partition(|&i| resid[i] < cut);
         return Some(vec![a, b]);
     }
@@ -443,7 +448,7 @@ fn find_valley(vals: &[f64], bin: f64, min_sep: f64, p: &Params) -> Option<f64> 
     s.sort_unstable_by(f64::total_cmp);
     let (lo, hi) = (s[0], s[s.len() - 1]);
     let nb = ((hi - lo) / bin).ceil() as usize + 1;
-    if nb < 5 || nb > 20_000 {
+    if !(5..=20_000).contains(&nb) {
         return None;
     }
     let mut h = vec![0.0f64; nb];
@@ -613,6 +618,7 @@ fn bar_split(pts: &[[f64; 2]], p: &Params) -> Option<Vec<Vec<usize>>> {
 }
 
 /// One bar candidate of [`bar_split`]: direction `theta`, densest window starting at bin `w0`.
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
 fn bar_split_at(
     pts: &[[f64; 2]],
     rel: &[[f64; 2]],
@@ -714,13 +720,11 @@ fn bar_split_at(
             }
         }
         let one_side = same_side as f64 >= 0.95 * part.len() as f64;
-        let perpendicular = phi >= 60.0
-            && pa - ba >= 0.3
-            && bb - pb >= 0.3
-            && (bb - ba) >= 2.5 * (pb - pa)
-            && one_side;
+        let perpendicular =
+            phi >= 60.0 && pa - ba >= 0.3 && bb - pb >= 0.3 && (bb - ba) >= 2.5 * (pb - pa) && one_side;
         // A filled stripe touching the bar at an angle (chevrons on an edge line).
-        let diagonal = phi > 20.0 && phi < 70.0 && one_side && shape.length() >= 1.0 && filled_bar(&pxy).is_some();
+        let diagonal =
+            phi > 20.0 && phi < 70.0 && one_side && shape.length() >= 1.0 && filled_bar(&pxy).is_some();
         // A long line takes nothing with it: whatever touches it is another object.
         if long || parallel || perpendicular || diagonal {
             out.push(part);

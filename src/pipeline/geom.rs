@@ -238,7 +238,9 @@ pub fn components_adaptive(xy: &[[f64; 2]], r_min: f64, r_max: f64, k: usize) ->
         let key = ((p[0] / r_max).floor() as i64, (p[1] / r_max).floor() as i64);
         for dx in -1..=1 {
             for dy in -1..=1 {
-                let Some(s) = sgrid.slice((key.0 + dx, key.1 + dy)) else { continue };
+                let Some(s) = sgrid.slice((key.0 + dx, key.1 + dy)) else {
+                    continue;
+                };
                 for &b in s {
                     let j = sparse[b as usize];
                     if b as usize <= a {

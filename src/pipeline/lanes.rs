@@ -172,7 +172,8 @@ pub struct Lanes {
 
 /// A piece in the trajectory frame.
 struct Item {
-    key: usize,
+    /// Caller keys (several when overlapping duplicates were merged).
+    keys: Vec<usize>,
     /// (s, o) samples sorted by s.
     so: Vec<[f64; 2]>,
     width: f64,
@@ -241,7 +242,7 @@ fn seg_of(items: &[Item], members: Vec<usize>) -> Seg {
 }
 
 /// Mutual-best linking of segments; returns chains of segment indices in driving order.
-fn link(segs: &[Seg], p: &Params) -> Vec<Vec<usize>> {
+fn link(segs: &[Seg], p: &Params, barriers: &[[f64; 4]]) -> Vec<Vec<usize>> {
     let n = segs.len();
     let mut order: Vec<usize> = (0..n).collect();
     order.sort_by(|&a, &b| segs[a].s0.total_cmp(&segs[b].s0).then(a.cmp(&b)));
@@ -272,7 +273,18 @@ fn link(segs: &[Seg], p: &Params) -> Vec<Vec<usize>> {
             if (sa.slope1.atan() - sb.slope0.atan()).abs() > max_tan {
                 continue;
             }
-            if sa.width.min(sb.width) < p.min_width_similarity * sa.width.max(sb.width) {
+            // Widths compared with 5 cm added: sparse far-range pieces under-read their
+            // width by about a point spacing, which must not break a line.
+            // A barrier inside the gap (overlapping it by ≥ 0.1 m) at the line's offset.
+            let (gs0, gs1) = (sa.s1, sb.s0);
+            let om = 0.5 * (pa + pb);
+            if barriers
+                .iter()
+                .any(|b| b[0] < gs1 - 0.1 && b[1] > gs0 + 0.1 && om >= b[2] && om <= b[3])
+            {
+                continue;
+            }
+            if sa.width.min(sb.width) + 0.05 < p.min_width_similarity * (sa.width.max(sb.width) + 0.05) {
                 continue;
             }
             let cost = dev / tol.max(1e-6) + 0.5 * g / p.max_gap_m.max(1e-6);
@@ -286,12 +298,12 @@ fn link(segs: &[Seg], p: &Params) -> Vec<Vec<usize>> {
     }
     let mut next: Vec<Option<usize>> = vec![None; n];
     let mut has_prev = vec![false; n];
-    for a in 0..n {
-        if let Some((_, b)) = best_next[a] {
-            if best_prev[b].map(|x| x.1) == Some(a) {
-                next[a] = Some(b);
-                has_prev[b] = true;
-            }
+    for (a, bn) in best_next.iter().enumerate() {
+        if let Some((_, b)) = *bn
+            && best_prev[b].map(|x| x.1) == Some(a)
+        {
+            next[a] = Some(b);
+            has_prev[b] = true;
         }
     }
     let mut chains = Vec::new();
@@ -312,7 +324,37 @@ fn link(segs: &[Seg], p: &Params) -> Vec<Vec<usize>> {
 
 /// Grow lane lines from pieces. See the module docs.
 pub fn grow(pieces: &[LanePiece], traj: &Trajectory, p: &Params) -> Lanes {
+    grow_with_barriers(pieces, traj, p, &[])
+}
+
+/// [`grow`], never bridging a gap across a barrier: markings that cross the road (stop
+/// lines, crosswalks; outlines in the pieces' coordinates). A lane line does not run on
+/// through a crosswalk or past a stop line into the junction, however well the lines on
+/// both sides align.
+pub fn grow_with_barriers(
+    pieces: &[LanePiece],
+    traj: &Trajectory,
+    p: &Params,
+    barriers: &[Vec<[f64; 2]>],
+) -> Lanes {
     let refl = RefLine::new(traj);
+    // Barrier boxes in the trajectory frame (s0, s1, o0, o1), widened by 0.5 m across so
+    // the gaps between zebra stripes count too.
+    let boxes: Vec<[f64; 4]> = barriers
+        .iter()
+        .filter(|r| !r.is_empty())
+        .map(|r| {
+            let so: Vec<[f64; 2]> = r.iter().map(|&v| refl.locate(v)).collect();
+            let f = |k: usize, lo: bool| {
+                so.iter()
+                    .map(|q| q[k])
+                    .fold(if lo { f64::INFINITY } else { f64::NEG_INFINITY }, |a, b| {
+                        if lo { a.min(b) } else { a.max(b) }
+                    })
+            };
+            [f(0, true), f(0, false), f(1, true) - 0.5, f(1, false) + 0.5]
+        })
+        .collect();
     let mut items: Vec<Item> = pieces
         .iter()
         .filter(|q| {
@@ -322,25 +364,27 @@ pub fn grow(pieces: &[LanePiece], traj: &Trajectory, p: &Params) -> Lanes {
             let mut so: Vec<[f64; 2]> = q.centerline.iter().map(|&v| refl.locate(v)).collect();
             so.sort_by(|a, b| a[0].total_cmp(&b[0]));
             (so[so.len() - 1][0] - so[0][0] >= 0.3).then(|| Item {
-                key: q.key,
+                keys: vec![q.key],
                 so,
                 width: q.width_m.max(0.01),
                 conf: q.confidence,
             })
         })
         .collect();
-    items.sort_by(|a, b| a.so[0][0].total_cmp(&b.so[0][0]).then(a.key.cmp(&b.key)));
+    items.sort_by(|a, b| a.so[0][0].total_cmp(&b.so[0][0]).then(a.keys.cmp(&b.keys)));
+    let items = merge_overlaps(items);
     // Round 1: pieces; round 2: chains.
     let segs: Vec<Seg> = (0..items.len()).map(|i| seg_of(&items, vec![i])).collect();
-    let chains1: Vec<Vec<usize>> = link(&segs, p)
+    let chains1: Vec<Vec<usize>> = link(&segs, p, &boxes)
         .into_iter()
         .map(|c| c.into_iter().flat_map(|s| segs[s].members.clone()).collect())
         .collect();
     let segs2: Vec<Seg> = chains1.into_iter().map(|m| seg_of(&items, m)).collect();
-    let chains: Vec<Vec<usize>> = link(&segs2, p)
+    let chains: Vec<Vec<usize>> = link(&segs2, p, &boxes)
         .into_iter()
         .map(|c| c.into_iter().flat_map(|s| segs2[s].members.clone()).collect())
         .collect();
+    let chains = merge_parallel_chains(&items, chains);
     let mut out = Lanes::default();
     for mut chain in chains {
         chain.sort_by(|&a, &b| items[a].so[0][0].total_cmp(&items[b].so[0][0]).then(a.cmp(&b)));
@@ -368,15 +412,21 @@ pub fn grow(pieces: &[LanePiece], traj: &Trajectory, p: &Params) -> Lanes {
                 LaneLineClass::SolidLine => MarkingClass::SolidLine,
                 LaneLineClass::DashedLine => MarkingClass::DashedLine,
             };
-            out.classes
-                .extend(members.iter().map(|&m| (items[m].key, piece_class)));
+            out.classes.extend(
+                members
+                    .iter()
+                    .flat_map(|&m| items[m].keys.iter().map(move |&k| (k, piece_class))),
+            );
             let start = refl.locate(line[0]);
             out.lines.push(LaneResult {
                 class,
                 length_m: geom::polyline_length(&line),
                 line,
                 confidence: (mean_conf * (0.6 + 0.4 * support) * (0.5 + 0.5 * fit)).clamp(0.0, 1.0),
-                pieces: members.iter().map(|&m| items[m].key).collect(),
+                pieces: members
+                    .iter()
+                    .flat_map(|&m| items[m].keys.iter().copied())
+                    .collect(),
                 start,
             });
         }
@@ -387,6 +437,112 @@ pub fn grow(pieces: &[LanePiece], traj: &Trajectory, p: &Params) -> Lanes {
             .then(a.start[1].total_cmp(&b.start[1]))
     });
     out.classes.sort_unstable_by_key(|c| c.0);
+    out
+}
+
+/// Chains that run along the same painted line over a common stretch (fragments of a
+/// sparse far line linked into two interleaved chains) are one lane line: same test as
+/// `merge_overlaps`, on the chains' pooled samples.
+fn merge_parallel_chains(items: &[Item], chains: Vec<Vec<usize>>) -> Vec<Vec<usize>> {
+    let pooled: Vec<Item> = chains
+        .iter()
+        .map(|c| {
+            let mut so: Vec<[f64; 2]> = c.iter().flat_map(|&m| items[m].so.iter().copied()).collect();
+            so.sort_by(|a, b| a[0].total_cmp(&b[0]));
+            Item {
+                keys: c.clone(),
+                so,
+                width: c.iter().map(|&m| items[m].width).fold(0.0, f64::max),
+                conf: 0.0,
+            }
+        })
+        .collect();
+    // `merge_overlaps` sorts by start and concatenates `keys`, here the item indices.
+    let mut sorted = pooled;
+    sorted.sort_by(|a, b| a.so[0][0].total_cmp(&b.so[0][0]).then(a.keys.cmp(&b.keys)));
+    merge_overlaps(sorted).into_iter().map(|m| m.keys).collect()
+}
+
+/// Median offset of the samples of `so` with s in [a, b].
+fn median_offset_in(so: &[[f64; 2]], a: f64, b: f64) -> Option<f64> {
+    let mut v: Vec<f64> = so
+        .iter()
+        .filter(|q| q[0] >= a && q[0] <= b)
+        .map(|q| q[1])
+        .collect();
+    (!v.is_empty()).then(|| geom::median(&mut v))
+}
+
+/// Merge pieces that cover the same stretch of the same painted line (a line split
+/// lengthwise into strips, duplicates from two scanner heads or overlapping chunks): they
+/// overlap along the road by ≥ 0.5 m (or half the shorter one) and their median offsets
+/// over the overlap differ by less than half the wider piece plus 5 cm. Side-by-side lines
+/// (≥ 0.25 m centre to centre) are never merged. Input sorted by start; output too.
+fn merge_overlaps(items: Vec<Item>) -> Vec<Item> {
+    let n = items.len();
+    let mut parent: Vec<usize> = (0..n).collect();
+    fn find(p: &mut [usize], mut a: usize) -> usize {
+        while p[a] != a {
+            p[a] = p[p[a]];
+            a = p[a];
+        }
+        a
+    }
+    let ext = |it: &Item| (it.so[0][0], it.so[it.so.len() - 1][0]);
+    let mut any = false;
+    for i in 0..n {
+        let (a0, a1) = ext(&items[i]);
+        for j in i + 1..n {
+            let (b0, b1) = ext(&items[j]);
+            if b0 >= a1 {
+                break;
+            }
+            let (lo, hi) = (a0.max(b0), a1.min(b1));
+            let ov = hi - lo;
+            if ov < 0.5_f64.min(0.5 * (a1 - a0).min(b1 - b0)) {
+                continue;
+            }
+            let (Some(oa), Some(ob)) = (
+                median_offset_in(&items[i].so, lo, hi),
+                median_offset_in(&items[j].so, lo, hi),
+            ) else {
+                continue;
+            };
+            if (oa - ob).abs() < 0.5 * items[i].width.max(items[j].width) + 0.05 {
+                let (ri, rj) = (find(&mut parent, i), find(&mut parent, j));
+                parent[ri.max(rj)] = ri.min(rj);
+                any = true;
+            }
+        }
+    }
+    if !any {
+        return items;
+    }
+    let mut slots: Vec<Option<Item>> = items.into_iter().map(Some).collect();
+    let mut out: Vec<Item> = Vec::new();
+    let mut at: Vec<Option<usize>> = vec![None; n];
+    for (i, slot) in slots.iter_mut().enumerate() {
+        let r = find(&mut parent, i);
+        let it = slot.take().expect("each item once");
+        match at[r] {
+            None => {
+                at[r] = Some(out.len());
+                out.push(it);
+            }
+            Some(k) => {
+                let m = &mut out[k];
+                m.so.extend(it.so);
+                m.keys.extend(it.keys);
+                m.width = m.width.max(it.width);
+                m.conf = m.conf.max(it.conf);
+            }
+        }
+    }
+    for m in &mut out {
+        m.so.sort_by(|a, b| a[0].total_cmp(&b[0]));
+        m.keys.sort_unstable();
+    }
+    out.sort_by(|a, b| a.so[0][0].total_cmp(&b.so[0][0]).then(a.keys.cmp(&b.keys)));
     out
 }
 
@@ -426,7 +582,18 @@ fn regimes(items: &[Item], chain: &[usize], p: &Params) -> Vec<(LaneLineClass, V
             lens.iter().filter(|&&l| (l - med).abs() <= 0.35 * med).count() as f64 >= 0.6 * lens.len() as f64;
         let span = runs[j].1 - runs[i].0;
         let paint = lens.iter().sum::<f64>() / span.max(1e-9);
-        if lens.len() >= p.min_dashes && regular && paint <= 0.8 {
+        // Painted dashes repeat with regular gaps too (every standard fixes the gap);
+        // a solid line broken by parked cars or shadows has irregular gaps. Gaps much
+        // longer than the median (a missing dash, an occlusion) are left out of the test.
+        let gaps: Vec<f64> = (i..j).map(|k| runs[k + 1].0 - runs[k].1).collect();
+        let regular_gaps = gaps.len() < 2 || {
+            let mut g = gaps.clone();
+            let mg = geom::median(&mut g);
+            let usable: Vec<f64> = gaps.iter().copied().filter(|&x| x <= 1.8 * mg).collect();
+            usable.iter().filter(|&&x| (x - mg).abs() <= 0.35 * mg).count() as f64
+                >= 0.6 * usable.len() as f64
+        };
+        if lens.len() >= p.min_dashes && regular && regular_gaps && paint <= 0.7 {
             dashed[i..=j].iter_mut().for_each(|d| *d = true);
         }
         i = j + 1;

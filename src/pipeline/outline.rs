@@ -72,7 +72,8 @@ pub fn convex_hull(pts: &[[f64; 2]]) -> Vec<[f64; 2]> {
     if p.len() < 3 {
         return p;
     }
-    let cross = |o: [f64; 2], a: [f64; 2], b: [f64; 2]| (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]);
+    let cross =
+        |o: [f64; 2], a: [f64; 2], b: [f64; 2]| (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]);
     let mut hull: Vec<[f64; 2]> = Vec::with_capacity(2 * p.len());
     for &q in &p {
         while hull.len() >= 2 && cross(hull[hull.len() - 2], hull[hull.len() - 1], q) <= 0.0 {
@@ -96,7 +97,11 @@ pub fn convex_hull(pts: &[[f64; 2]]) -> Vec<[f64; 2]> {
 /// vertices of that piece. None when no triangle survives (too few or collinear points, or
 /// R too small).
 pub fn alpha_shape(pts: &[[f64; 2]], radius: f64) -> Option<(Vec<[f64; 2]>, f64)> {
-    let mut uniq: Vec<[f64; 2]> = pts.iter().copied().filter(|p| p[0].is_finite() && p[1].is_finite()).collect();
+    let mut uniq: Vec<[f64; 2]> = pts
+        .iter()
+        .copied()
+        .filter(|p| p[0].is_finite() && p[1].is_finite())
+        .collect();
     uniq.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
     uniq.dedup();
     if uniq.len() < 3 {
@@ -170,7 +175,9 @@ pub fn alpha_shape(pts: &[[f64; 2]], radius: f64) -> Option<(Vec<[f64; 2]>, f64)
         for e in f.adjacent_edges() {
             let other_kept = e.rev().face().as_inner().is_some_and(|o| kept[o.fix().index()]);
             if !other_kept {
-                next.entry(e.from().fix().index()).or_default().push(e.to().fix().index());
+                next.entry(e.from().fix().index())
+                    .or_default()
+                    .push(e.to().fix().index());
                 nedges += 1;
             }
         }
@@ -193,8 +200,7 @@ pub fn alpha_shape(pts: &[[f64; 2]], radius: f64) -> Option<(Vec<[f64; 2]>, f64)
         while next.get(&s).is_some_and(|v| !v.is_empty()) {
             let mut ring = vec![positions[s]];
             let mut cur = s;
-            loop {
-                let Some(list) = next.get_mut(&cur) else { break };
+            while let Some(list) = next.get_mut(&cur) {
                 let Some(nx) = list.pop() else { break };
                 if nx == s {
                     break;
@@ -223,10 +229,10 @@ pub fn alpha_shape(pts: &[[f64; 2]], radius: f64) -> Option<(Vec<[f64; 2]>, f64)
 pub fn irregular(pts: &[[f64; 2]], spacing: f64) -> Vec<[f64; 2]> {
     let mut r = (3.0 * spacing).max(0.15);
     for _ in 0..4 {
-        if let Some((ring, frac)) = alpha_shape(pts, r) {
-            if frac >= 0.95 {
-                return ring;
-            }
+        if let Some((ring, frac)) = alpha_shape(pts, r)
+            && frac >= 0.95
+        {
+            return ring;
         }
         r *= 2.0;
     }
@@ -263,17 +269,73 @@ pub fn buffered_line(line: &[[f64; 2]], half_width: f64) -> Vec<[f64; 2]> {
         .collect();
     let mut ring: Vec<[f64; 2]> = Vec::with_capacity(2 * n);
     for i in 0..n {
-        ring.push([line[i][0] - normals[i][0] * half_width, line[i][1] - normals[i][1] * half_width]);
+        ring.push([
+            line[i][0] - normals[i][0] * half_width,
+            line[i][1] - normals[i][1] * half_width,
+        ]);
     }
     for i in (0..n).rev() {
-        ring.push([line[i][0] + normals[i][0] * half_width, line[i][1] + normals[i][1] * half_width]);
+        ring.push([
+            line[i][0] + normals[i][0] * half_width,
+            line[i][1] + normals[i][1] * half_width,
+        ]);
     }
     ring
+}
+
+/// True when the closed ring (not repeated first vertex) has no two non-adjacent edges
+/// that touch or cross: a valid simple polygon boundary. O(n²) over the n edges (outlines
+/// have tens to a few hundred vertices).
+pub fn is_simple(ring: &[[f64; 2]]) -> bool {
+    let n = ring.len();
+    if n < 3 {
+        return false;
+    }
+    let orient =
+        |a: [f64; 2], b: [f64; 2], c: [f64; 2]| (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+    let on_seg = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| {
+        c[0] >= a[0].min(b[0]) && c[0] <= a[0].max(b[0]) && c[1] >= a[1].min(b[1]) && c[1] <= a[1].max(b[1])
+    };
+    let cross = |p1: [f64; 2], p2: [f64; 2], q1: [f64; 2], q2: [f64; 2]| {
+        let (d1, d2) = (orient(q1, q2, p1), orient(q1, q2, p2));
+        let (d3, d4) = (orient(p1, p2, q1), orient(p1, p2, q2));
+        if ((d1 > 0.0 && d2 < 0.0) || (d1 < 0.0 && d2 > 0.0))
+            && ((d3 > 0.0 && d4 < 0.0) || (d3 < 0.0 && d4 > 0.0))
+        {
+            return true;
+        }
+        (d1 == 0.0 && on_seg(q1, q2, p1))
+            || (d2 == 0.0 && on_seg(q1, q2, p2))
+            || (d3 == 0.0 && on_seg(p1, p2, q1))
+            || (d4 == 0.0 && on_seg(p1, p2, q2))
+    };
+    for i in 0..n {
+        let (a, b) = (ring[i], ring[(i + 1) % n]);
+        for j in i + 2..n {
+            if i == 0 && j == n - 1 {
+                continue; // adjacent through the closing edge
+            }
+            if cross(a, b, ring[j], ring[(j + 1) % n]) {
+                return false;
+            }
+        }
+    }
+    true
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn simple_rings_are_told_from_self_intersecting_ones() {
+        assert!(is_simple(&[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]));
+        // Bow tie.
+        assert!(!is_simple(&[[0.0, 0.0], [1.0, 1.0], [1.0, 0.0], [0.0, 1.0]]));
+        // Touching itself at a vertex.
+        assert!(!is_simple(&[[0.0, 0.0], [2.0, 0.0], [1.0, 0.0], [1.0, 1.0]]));
+        assert!(!is_simple(&[[0.0, 0.0], [1.0, 0.0]]));
+    }
 
     #[test]
     fn degenerate_inputs() {

@@ -55,8 +55,7 @@ impl RefLine {
                 // Symmetric window, truncated to what exists on both sides.
                 let h = half.min(i).min(n - 1 - i);
                 let (mut sx, mut sy, mut sw) = (0.0, 0.0, 0.0);
-                for k in 0..=h {
-                    let w = kern[k];
+                for (k, &w) in kern.iter().enumerate().take(h + 1) {
                     for j in if k == 0 { vec![i] } else { vec![i - k, i + k] } {
                         sx += w * raw[j][0];
                         sy += w * raw[j][1];

@@ -90,7 +90,13 @@ pub struct Piece {
 /// Heading in degrees clockwise from north of direction `d` (x east, y north), in [0, 360).
 pub fn heading_deg(d: [f64; 2]) -> f64 {
     let h = d[0].atan2(d[1]).to_degrees();
-    if h < 0.0 { h + 360.0 } else if h >= 360.0 { h - 360.0 } else { h }
+    if h < 0.0 {
+        h + 360.0
+    } else if h >= 360.0 {
+        h - 360.0
+    } else {
+        h
+    }
 }
 
 /// Outline every candidate (see the module docs).
@@ -118,7 +124,13 @@ pub fn outlines(cloud: &PointCloud, candidates: &[Candidate], params: &Params) -
                         let ring = outline::buffered_line(&simple, l.width_m / 2.0);
                         (ring, l.length_m, l.width_m, heading_deg(chord), Some(cl))
                     } else {
-                        (s.corners().to_vec(), s.length_m, s.width_m, heading_deg(along), Some(cl))
+                        (
+                            s.corners().to_vec(),
+                            s.length_m,
+                            s.width_m,
+                            heading_deg(along),
+                            Some(cl),
+                        )
                     }
                 }
                 MarkingClass::StopLine => {
@@ -130,9 +142,16 @@ pub fn outlines(cloud: &PointCloud, candidates: &[Candidate], params: &Params) -
                     };
                     (s.corners().to_vec(), s.length_m, s.width_m, heading_deg(d), None)
                 }
-                MarkingClass::Crosswalk | MarkingClass::Guideline | MarkingClass::DashedLine | MarkingClass::SolidLine => {
-                    (s.corners().to_vec(), s.length_m, s.width_m, heading_deg(along), None)
-                }
+                MarkingClass::Crosswalk
+                | MarkingClass::Guideline
+                | MarkingClass::DashedLine
+                | MarkingClass::SolidLine => (
+                    s.corners().to_vec(),
+                    s.length_m,
+                    s.width_m,
+                    heading_deg(along),
+                    None,
+                ),
                 _ => {
                     let pts: Vec<[f64; 2]> = c.indices.iter().map(|&i| [cloud.x[i], cloud.y[i]]).collect();
                     let mut ring = outline::irregular(&pts, s.spacing_m);
@@ -151,6 +170,17 @@ pub fn outlines(cloud: &PointCloud, candidates: &[Candidate], params: &Params) -
                     (ring, s.length_m, s.width_m, heading_deg(along), None)
                 }
             };
+            // A self-intersecting ring (a buffered centreline folding on a tight bend, an
+            // alpha shape pinched at a vertex) is no valid polygon: the convex hull of its
+            // vertices stands in.
+            let mut ring = ring;
+            ring.dedup();
+            if ring.len() > 1 && ring[0] == ring[ring.len() - 1] {
+                ring.pop();
+            }
+            if !outline::is_simple(&ring) {
+                ring = outline::convex_hull(&ring);
+            }
             // A degenerate outline (a cluster collapsed to a line or a point) is no painted
             // object: it would be an invalid GeoJSON polygon, so it is dropped here.
             let mut distinct = ring.clone();
@@ -194,7 +224,12 @@ pub fn assemble(pieces: Vec<Piece>, traj_abs: &Trajectory, params: &Params) -> (
             })
         })
         .collect();
-    let lanes = lanes::grow(&lane_pieces, traj_abs, &params.lane_lines);
+    let barriers: Vec<Vec<[f64; 2]>> = pieces
+        .iter()
+        .filter(|p| matches!(p.marking.class, MarkingClass::StopLine | MarkingClass::Crosswalk))
+        .map(|p| p.marking.outline.clone())
+        .collect();
+    let lanes = lanes::grow_with_barriers(&lane_pieces, traj_abs, &params.lane_lines, &barriers);
     let mut pieces = pieces;
     for &(k, class) in &lanes.classes {
         pieces[k].marking.class = class;
@@ -219,7 +254,10 @@ pub fn assemble(pieces: Vec<Piece>, traj_abs: &Trajectory, params: &Params) -> (
     order.sort_by(|a, b| {
         a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)).then_with(|| {
             let (p, q) = (&pieces[a.2].marking.outline, &pieces[b.2].marking.outline);
-            let (p0, q0) = (p.first().copied().unwrap_or([0.0; 2]), q.first().copied().unwrap_or([0.0; 2]));
+            let (p0, q0) = (
+                p.first().copied().unwrap_or([0.0; 2]),
+                q.first().copied().unwrap_or([0.0; 2]),
+            );
             p0[0].total_cmp(&q0[0]).then(p0[1].total_cmp(&q0[1]))
         })
     });
