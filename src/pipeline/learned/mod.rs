@@ -40,6 +40,7 @@
 //! multiply-adds per point); memory O(batch · n) per worker plus one session per worker.
 
 pub mod features;
+pub mod refine;
 pub mod runtime;
 
 use std::path::Path;
@@ -48,6 +49,7 @@ use std::sync::Mutex;
 use rayon::prelude::*;
 
 pub use features::{ClusterPoints, FEATURES_PER_POINT};
+pub use refine::{Params, RefineStats, refine};
 
 use crate::pipeline::PipelineError;
 use crate::pipeline::types::MarkingClass;
