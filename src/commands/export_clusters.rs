@@ -106,6 +106,9 @@ struct Survey {
     traj: Trajectory,
 }
 
+/// Which of the points near a distractor's centre belong to it.
+type Keep = Box<dyn Fn(f64, f64) -> bool>;
+
 /// One exported cluster before feature preparation.
 struct Sample {
     label: MarkingClass,
@@ -399,8 +402,8 @@ impl Grid {
     /// All points within `margin_cells` cells of a paint point.
     fn around_paint(cloud: &PointCloud, labels: &[u32], margin_cells: i64) -> Grid {
         let mut wanted = std::collections::HashSet::new();
-        for i in 0..cloud.len() {
-            if labels[i] > 0 {
+        for (i, &label) in labels.iter().enumerate().take(cloud.len()) {
+            if label > 0 {
                 let (cx, cy) = cell_of(cloud.x[i], cloud.y[i]);
                 for dx in -margin_cells..=margin_cells {
                     for dy in -margin_cells..=margin_cells {
@@ -850,7 +853,7 @@ fn distractor(survey: &Survey, grid: &Grid, anchor: usize, j: usize, rng: &mut C
     ];
     let kind = rng.random_range(0..3);
     let mut found = Vec::new();
-    let (name, keep): (&'static str, Box<dyn Fn(f64, f64) -> bool>) = match kind {
+    let (name, keep): (&'static str, Keep) = match kind {
         0 => {
             let r: f64 = rng.random_range(0.3..0.45);
             grid.within(cloud, c[0], c[1], r, &mut found);
@@ -865,7 +868,6 @@ fn distractor(survey: &Survey, grid: &Grid, anchor: usize, j: usize, rng: &mut C
             let a: f64 = rng.random_range(0.0..std::f64::consts::TAU);
             grid.within(cloud, c[0], c[1], len / 2.0 + amp + w, &mut found);
             let (ca, sa) = (a.cos(), a.sin());
-            let c = c;
             (
                 "streak",
                 Box::new(move |x: f64, y: f64| {
@@ -884,7 +886,6 @@ fn distractor(survey: &Survey, grid: &Grid, anchor: usize, j: usize, rng: &mut C
                 rng.random_range(0.0..6.3),
             ];
             grid.within(cloud, c[0], c[1], r0 * 1.8, &mut found);
-            let c = c;
             (
                 "blob",
                 Box::new(move |x: f64, y: f64| {
@@ -973,9 +974,9 @@ pub fn scores(cm: &[Vec<usize>]) -> (Vec<(f64, f64, f64, usize)>, f64) {
     let k = cm.len();
     let mut rows = Vec::with_capacity(k);
     let (mut sum_f, mut present) = (0.0, 0);
-    for c in 0..k {
-        let tp = cm[c][c] as f64;
-        let support: usize = cm[c].iter().sum();
+    for (c, row) in cm.iter().enumerate() {
+        let tp = row[c] as f64;
+        let support: usize = row.iter().sum();
         let predicted: usize = (0..k).map(|t| cm[t][c]).sum();
         let p = if predicted > 0 { tp / predicted as f64 } else { 0.0 };
         let r = if support > 0 { tp / support as f64 } else { 0.0 };
