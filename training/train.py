@@ -1,8 +1,8 @@
 """Train the PointNet++-lite marking classifier on clusters from `roadmark export-clusters`.
 
-    python training/train.py --data out/clusters-train --out out/train [--epochs 24] [--seed 0]
+    python training/train.py --data out/clusters-a out/clusters-b --out out/train [--epochs 24] [--seed 0]
 
-Reads ``points.npy`` (float32 [M, 256, 4], features of ``src/pipeline/learned/features.rs``)
+Reads (from every ``--data`` directory, concatenated) ``points.npy`` (float32 [M, 256, 4], features of ``src/pipeline/learned/features.rs``)
 and ``labels.npy`` (uint8 [M], index into ``model.CLASSES``) from ``--data``; holds out the
 clusters of every 10th survey (by ``surveys.npy``) for validation, unless ``--val`` names
 another export directory. Writes ``model.pt`` (best validation macro-F1),
@@ -39,6 +39,19 @@ from model import CLASSES, MIRROR, MarkingNet  # noqa: E402
 MIRROR_IDX = np.arange(len(CLASSES))
 for a, b in MIRROR.items():
     MIRROR_IDX[CLASSES.index(a)] = CLASSES.index(b)
+
+
+def load_many(paths: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Concatenate several export directories; survey ids stay distinct."""
+    xs, ys, ss = [], [], []
+    offset = 0
+    for p in paths:
+        x, y, s = load(p)
+        xs.append(x)
+        ys.append(y)
+        ss.append(s.astype(np.int64) + offset)
+        offset = int(ss[-1].max()) + 1 if len(s) else offset
+    return np.concatenate(xs), np.concatenate(ys), np.concatenate(ss)
 
 
 def load(path: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -82,8 +95,8 @@ def predict(net: nn.Module, x: np.ndarray, batch: int = 256) -> np.ndarray:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--data", required=True)
-    ap.add_argument("--val", help="separate export directory for validation")
+    ap.add_argument("--data", required=True, nargs="+", help="one or more export directories")
+    ap.add_argument("--val", nargs="+", help="separate export directories for validation")
     ap.add_argument("--out", required=True)
     ap.add_argument("--epochs", type=int, default=24)
     ap.add_argument("--steps-per-epoch", type=int, default=300)
@@ -96,9 +109,9 @@ def main() -> None:
     torch.manual_seed(args.seed)
     torch.set_num_threads(args.threads)
     rng = np.random.default_rng(args.seed)
-    x, y, surveys = load(args.data)
+    x, y, surveys = load_many(args.data)
     if args.val:
-        vx, vy, _ = load(args.val)
+        vx, vy, _ = load_many(args.val)
     else:
         val_mask = surveys % 10 == 9
         vx, vy = x[val_mask], y[val_mask]

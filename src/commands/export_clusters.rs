@@ -106,6 +106,9 @@ struct Survey {
     traj: Trajectory,
 }
 
+/// Which of the points near a distractor's centre belong to it.
+type Keep = Box<dyn Fn(f64, f64) -> bool>;
+
 /// One exported cluster before feature preparation.
 struct Sample {
     label: MarkingClass,
@@ -194,8 +197,10 @@ pub fn run(args: Args) -> Result<()> {
                     t_sim,
                     t0.elapsed().as_secs_f64()
                 );
-                surveys.push(serde_json::json!({"name": name, "scene": scene, "standard": standard.name,
-                    "seed": seed, "clusters": samples.len(), "per_class": per_class}));
+                surveys.push(
+                    serde_json::json!({"name": name, "scene": scene, "standard": standard.name,
+                    "seed": seed, "clusters": samples.len(), "per_class": per_class}),
+                );
                 if args.no_cache {
                     std::fs::remove_dir_all(&dir).ok();
                 }
@@ -244,15 +249,25 @@ pub fn run(args: Args) -> Result<()> {
 /// `A..B` (B excluded) or `a,b,c`.
 fn parse_seeds(s: &str) -> Result<Vec<u64>> {
     if let Some((a, b)) = s.split_once("..") {
-        let a: u64 = a.trim().parse().with_context(|| format!("--seeds {s}: bad start"))?;
-        let b: u64 = b.trim().parse().with_context(|| format!("--seeds {s}: bad end"))?;
+        let a: u64 = a
+            .trim()
+            .parse()
+            .with_context(|| format!("--seeds {s}: bad start"))?;
+        let b: u64 = b
+            .trim()
+            .parse()
+            .with_context(|| format!("--seeds {s}: bad end"))?;
         if b <= a {
             bail!("--seeds {s}: empty range");
         }
         Ok((a..b).collect())
     } else {
         s.split(',')
-            .map(|t| t.trim().parse::<u64>().with_context(|| format!("--seeds {s}: bad seed '{t}'")))
+            .map(|t| {
+                t.trim()
+                    .parse::<u64>()
+                    .with_context(|| format!("--seeds {s}: bad seed '{t}'"))
+            })
             .collect()
     }
 }
@@ -279,11 +294,18 @@ fn load_survey(dir: &Path) -> Result<Survey> {
     if raw.len() != cloud.len() * 4 {
         return Err(PipelineError::input(
             &labels_path,
-            format!("{} bytes for {} points (expected 4 per point)", raw.len(), cloud.len()),
+            format!(
+                "{} bytes for {} points (expected 4 per point)",
+                raw.len(),
+                cloud.len()
+            ),
         )
         .into());
     }
-    let labels: Vec<u32> = raw.chunks_exact(4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+    let labels: Vec<u32> = raw
+        .chunks_exact(4)
+        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
     let truth_path = dir.join("truth.geojson");
     let truth: serde_json::Value = serde_json::from_slice(
         &std::fs::read(&truth_path).with_context(|| format!("reading {}", truth_path.display()))?,
@@ -380,8 +402,8 @@ impl Grid {
     /// All points within `margin_cells` cells of a paint point.
     fn around_paint(cloud: &PointCloud, labels: &[u32], margin_cells: i64) -> Grid {
         let mut wanted = std::collections::HashSet::new();
-        for i in 0..cloud.len() {
-            if labels[i] > 0 {
+        for (i, &label) in labels.iter().enumerate().take(cloud.len()) {
+            if label > 0 {
                 let (cx, cy) = cell_of(cloud.x[i], cloud.y[i]);
                 for dx in -margin_cells..=margin_cells {
                     for dy in -margin_cells..=margin_cells {
@@ -484,7 +506,11 @@ fn cut_survey(survey: &Survey, seed: u64, per_class: usize) -> Vec<Sample> {
             continue;
         }
         let class = CLASSES[ci];
-        let budget = if class == MarkingClass::Unknown { per_class / 2 } else { per_class };
+        let budget = if class == MarkingClass::Unknown {
+            per_class / 2
+        } else {
+            per_class
+        };
         let mut order: Vec<usize> = (0..list.len()).collect();
         // Fisher–Yates with the survey generator: which markings a budget keeps.
         for i in (1..order.len()).rev() {
@@ -513,9 +539,16 @@ fn cut_survey(survey: &Survey, seed: u64, per_class: usize) -> Vec<Sample> {
         .collect();
     // Unknown: asphalt shaped like bright distractors next to the markings.
     let n_noise = per_class.saturating_sub(
-        samples.iter().filter(|s| s.label == MarkingClass::Unknown).count(),
+        samples
+            .iter()
+            .filter(|s| s.label == MarkingClass::Unknown)
+            .count(),
     );
-    let anchors: Vec<usize> = members.iter().filter(|p| p.len() >= MIN_POINTS).map(|p| p[p.len() / 2]).collect();
+    let anchors: Vec<usize> = members
+        .iter()
+        .filter(|p| p.len() >= MIN_POINTS)
+        .map(|p| p[p.len() / 2])
+        .collect();
     let noise_seeds: Vec<u64> = (0..n_noise).map(|_| rng.random()).collect();
     if !anchors.is_empty() {
         let noise: Vec<Sample> = noise_seeds
@@ -534,9 +567,15 @@ fn cut_survey(survey: &Survey, seed: u64, per_class: usize) -> Vec<Sample> {
 const MIN_POINTS: usize = 20;
 
 fn bbox(cloud: &PointCloud, pts: &[usize]) -> [f64; 4] {
-    pts.iter().fold([f64::MAX, f64::MAX, f64::MIN, f64::MIN], |b, &i| {
-        [b[0].min(cloud.x[i]), b[1].min(cloud.y[i]), b[2].max(cloud.x[i]), b[3].max(cloud.y[i])]
-    })
+    pts.iter()
+        .fold([f64::MAX, f64::MAX, f64::MIN, f64::MIN], |b, &i| {
+            [
+                b[0].min(cloud.x[i]),
+                b[1].min(cloud.y[i]),
+                b[2].max(cloud.x[i]),
+                b[3].max(cloud.y[i]),
+            ]
+        })
 }
 
 fn box_gap(a: &[f64; 4], b: &[f64; 4]) -> f64 {
@@ -659,7 +698,13 @@ fn wear(cloud: &PointCloud, pts: &[usize], rng: &mut ChaCha8Rng) -> Vec<usize> {
         return Vec::new();
     }
     let discs: Vec<([f64; 2], f64, f64)> = (0..rng.random_range(1..=6))
-        .map(|_| (pick(cloud, pts, rng), rng.random_range(0.05..0.4), rng.random_range(0.7..1.0)))
+        .map(|_| {
+            (
+                pick(cloud, pts, rng),
+                rng.random_range(0.05..0.4),
+                rng.random_range(0.7..1.0),
+            )
+        })
         .collect();
     pts.iter()
         .copied()
@@ -802,10 +847,13 @@ fn distractor(survey: &Survey, grid: &Grid, anchor: usize, j: usize, rng: &mut C
     let side: f64 = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
     let a0: f64 = rng.random_range(0.0..std::f64::consts::TAU);
     let off: f64 = rng.random_range(1.0..4.0);
-    let c = [cloud.x[anchor] + side * off * a0.cos(), cloud.y[anchor] + side * off * a0.sin()];
+    let c = [
+        cloud.x[anchor] + side * off * a0.cos(),
+        cloud.y[anchor] + side * off * a0.sin(),
+    ];
     let kind = rng.random_range(0..3);
     let mut found = Vec::new();
-    let (name, keep): (&'static str, Box<dyn Fn(f64, f64) -> bool>) = match kind {
+    let (name, keep): (&'static str, Keep) = match kind {
         0 => {
             let r: f64 = rng.random_range(0.3..0.45);
             grid.within(cloud, c[0], c[1], r, &mut found);
@@ -820,7 +868,6 @@ fn distractor(survey: &Survey, grid: &Grid, anchor: usize, j: usize, rng: &mut C
             let a: f64 = rng.random_range(0.0..std::f64::consts::TAU);
             grid.within(cloud, c[0], c[1], len / 2.0 + amp + w, &mut found);
             let (ca, sa) = (a.cos(), a.sin());
-            let c = c;
             (
                 "streak",
                 Box::new(move |x: f64, y: f64| {
@@ -833,9 +880,12 @@ fn distractor(survey: &Survey, grid: &Grid, anchor: usize, j: usize, rng: &mut C
         _ => {
             // A blob: a disc with a radius varying with the angle.
             let r0: f64 = rng.random_range(0.15..0.8);
-            let h: [f64; 3] = [rng.random_range(0.0..0.4), rng.random_range(0.0..0.3), rng.random_range(0.0..6.3)];
+            let h: [f64; 3] = [
+                rng.random_range(0.0..0.4),
+                rng.random_range(0.0..0.3),
+                rng.random_range(0.0..6.3),
+            ];
             grid.within(cloud, c[0], c[1], r0 * 1.8, &mut found);
-            let c = c;
             (
                 "blob",
                 Box::new(move |x: f64, y: f64| {
@@ -924,9 +974,9 @@ pub fn scores(cm: &[Vec<usize>]) -> (Vec<(f64, f64, f64, usize)>, f64) {
     let k = cm.len();
     let mut rows = Vec::with_capacity(k);
     let (mut sum_f, mut present) = (0.0, 0);
-    for c in 0..k {
-        let tp = cm[c][c] as f64;
-        let support: usize = cm[c].iter().sum();
+    for (c, row) in cm.iter().enumerate() {
+        let tp = row[c] as f64;
+        let support: usize = row.iter().sum();
         let predicted: usize = (0..k).map(|t| cm[t][c]).sum();
         let p = if predicted > 0 { tp / predicted as f64 } else { 0.0 };
         let r = if support > 0 { tp / support as f64 } else { 0.0 };
@@ -942,7 +992,10 @@ pub fn scores(cm: &[Vec<usize>]) -> (Vec<(f64, f64, f64, usize)>, f64) {
 
 fn print_report(cm: &[Vec<usize>]) {
     let (rows, macro_f1) = scores(cm);
-    println!("{:<22}{:>10}{:>8}{:>8}{:>9}", "class", "precision", "recall", "F1", "support");
+    println!(
+        "{:<22}{:>10}{:>8}{:>8}{:>9}",
+        "class", "precision", "recall", "F1", "support"
+    );
     for (c, &(p, r, f, n)) in CLASSES.iter().zip(&rows) {
         let predicted: usize = cm.iter().map(|row| row[*c as usize]).sum();
         if n > 0 || predicted > 0 {
@@ -1006,7 +1059,8 @@ struct NpyF32Writer {
 
 impl NpyF32Writer {
     fn create(path: &Path, inner: [usize; 2]) -> Result<Self> {
-        let mut file = BufWriter::new(File::create(path).with_context(|| format!("creating {}", path.display()))?);
+        let mut file =
+            BufWriter::new(File::create(path).with_context(|| format!("creating {}", path.display()))?);
         file.write_all(&npy_header("<f4", &[0, inner[0], inner[1]]))?;
         Ok(Self {
             file,
@@ -1030,7 +1084,9 @@ impl NpyF32Writer {
         self.file.seek(SeekFrom::Start(0))?;
         self.file
             .write_all(&npy_header("<f4", &[self.rows, self.inner[0], self.inner[1]]))?;
-        self.file.flush().with_context(|| format!("writing {}", self.path.display()))?;
+        self.file
+            .flush()
+            .with_context(|| format!("writing {}", self.path.display()))?;
         Ok(self.rows)
     }
 }

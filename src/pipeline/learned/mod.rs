@@ -40,6 +40,7 @@
 //! multiply-adds per point); memory O(batch · n) per worker plus one session per worker.
 
 pub mod features;
+pub mod refine;
 pub mod runtime;
 
 use std::path::Path;
@@ -48,6 +49,7 @@ use std::sync::Mutex;
 use rayon::prelude::*;
 
 pub use features::{ClusterPoints, FEATURES_PER_POINT};
+pub use refine::{Params, RefineStats, refine};
 
 use crate::pipeline::PipelineError;
 use crate::pipeline::types::MarkingClass;
@@ -230,12 +232,15 @@ impl Classifier {
     fn new_session(model: &[u8], source: &str) -> Result<ort::session::Session, PipelineError> {
         let env = runtime::env()?;
         let builder = ort::session::Session::builder(env).map_err(|e| model_err(source, e))?;
+        let builder = builder.with_intra_threads(1).map_err(|e| model_err(source, e))?;
+        let builder = builder.with_inter_threads(1).map_err(|e| model_err(source, e))?;
+        let builder = builder
+            .with_intra_op_spinning(false)
+            .map_err(|e| model_err(source, e))?;
+        let mut builder = builder
+            .with_optimization_level(ort::session::builder::GraphOptimizationLevel::All)
+            .map_err(|e| model_err(source, e))?;
         builder
-            .with_intra_threads(1)
-            .and_then(|b| b.with_inter_threads(1))
-            .and_then(|b| b.with_intra_op_spinning(false))
-            .and_then(|b| b.with_optimization_level(ort::session::builder::GraphOptimizationLevel::All))
-            .map_err(|e| model_err(source, e))?
             .commit_from_memory(model)
             .map_err(|e| model_err(source, e))
     }
