@@ -601,7 +601,9 @@ fn finish_clusters(
     }
     drop(complete);
     // The classifier's reference line only needs the trajectory around these clusters.
-    let candidates = classify::run(&cloud, &clusters, traj, &p.classify);
+    let mut candidates = classify::run(&cloud, &clusters, traj, &p.classify);
+    // The learned classifier takes the candidates the geometric rules could not decide.
+    super::learned::refine(&mut candidates, &cloud, &super::learned::Params::default())?;
     ctx.stats.add(5, t0);
     let t0 = Instant::now();
     let pieces = vectorize::outlines(&cloud, &candidates, &p.vectorize);
