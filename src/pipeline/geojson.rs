@@ -179,12 +179,17 @@ fn collection(ex: &Extraction, polygon_ccw: bool) -> Vec<Value> {
                 marking_properties(m),
             )
         })
-        .chain(ex.lane_lines.iter().filter(|l| distinct_line(&l.line).len() >= 2).map(|l| {
-            feature(
-                json!({"type": "LineString", "coordinates": distinct_line(&l.line)}),
-                lane_properties(l),
-            )
-        }))
+        .chain(
+            ex.lane_lines
+                .iter()
+                .filter(|l| distinct_line(&l.line).len() >= 2)
+                .map(|l| {
+                    feature(
+                        json!({"type": "LineString", "coordinates": distinct_line(&l.line)}),
+                        lane_properties(l),
+                    )
+                }),
+        )
         .collect()
 }
 
