@@ -898,6 +898,7 @@ async fn job_runs_to_success_with_progress_result_and_links() {
         "cluster",
         "classify",
         "vectorize",
+        "learned",
     ] {
         assert!(
             job["params"][stage].is_object(),

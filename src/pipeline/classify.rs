@@ -359,16 +359,7 @@ fn line_geometry(pts: &[[f64; 2]], refl: &RefLine, p: &Params) -> Option<LineGeo
     // Fitted offsets at the slice centres, interpolated for the residuals.
     let fo: Vec<f64> = ks.iter().map(|&s| fit(s).0).collect();
     for q in &so {
-        let j = ks.partition_point(|&s| s < q[0]);
-        let c = if j == 0 {
-            fo[0]
-        } else if j >= ks.len() {
-            fo[ks.len() - 1]
-        } else {
-            let f = (q[0] - ks[j - 1]) / (ks[j] - ks[j - 1]).max(1e-9);
-            fo[j - 1] + f * (fo[j] - fo[j - 1])
-        };
-        resid.push(q[1] - c);
+        resid.push(q[1] - geom::interp_clamped(&ks, &fo, q[0]));
     }
     resid.sort_unstable_by(f64::total_cmp);
     let (r0, r1) = geom::robust_extent(&resid);
@@ -570,16 +561,7 @@ fn line_track(so: &[[f64; 2]], s_lo: f64, s_hi: f64, p: &Params) -> Option<impl 
         if q[0] < t0 || q[0] > t1 {
             return false;
         }
-        let i = ps.partition_point(|&s| s < q[0]);
-        let c = if i == 0 {
-            po[0]
-        } else if i >= ps.len() {
-            po[ps.len() - 1]
-        } else {
-            let f = (q[0] - ps[i - 1]) / (ps[i] - ps[i - 1]).max(1e-9);
-            po[i - 1] + f * (po[i] - po[i - 1])
-        };
-        (q[1] - c).abs() <= half
+        (q[1] - geom::interp_clamped(&ps, &po, q[0])).abs() <= half
     })
 }
 
@@ -682,20 +664,12 @@ fn rejoin(
         }
     }
     let mut parent: Vec<usize> = (0..n).collect();
-    fn find(p: &mut [usize], mut a: usize) -> usize {
-        while p[a] != a {
-            p[a] = p[p[a]];
-            a = p[a];
-        }
-        a
-    }
     let mut merged_any = false;
     for (a, bn) in best_next.iter().enumerate() {
         if let Some((_, b)) = *bn
             && best_prev[b].map(|x| x.1) == Some(a)
         {
-            let (ra, rb) = (find(&mut parent, a), find(&mut parent, b));
-            parent[ra.max(rb)] = ra.min(rb);
+            geom::union(&mut parent, a, b);
             merged_any = true;
         }
     }
@@ -704,7 +678,7 @@ fn rejoin(
     }
     let mut groups: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
     for i in 0..n {
-        let r = find(&mut parent, i);
+        let r = geom::find_root(&mut parent, i);
         groups.entry(r).or_default().push(i);
     }
     let mut slots: Vec<Option<Candidate>> = feats.into_iter().map(Some).collect();

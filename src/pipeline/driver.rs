@@ -118,14 +118,8 @@ pub fn run_collecting_marking_points(
     params: &ValidParams,
     progress: &dyn Progress,
 ) -> Result<(Extraction, PointCloud), PipelineError> {
-    let mut ctx = Ctx {
-        params,
-        progress,
-        stats: RunStats::default(),
-        collect: Some(PointCloud::default()),
-    };
-    let ex = run_ctx(&mut ctx, inputs)?;
-    Ok((ex, ctx.collect.take().unwrap_or_default()))
+    let (ex, _, marks) = run_collecting_with_stats(inputs, params, progress)?;
+    Ok((ex, marks))
 }
 
 /// [`run_collecting_marking_points`] with the run's statistics.
@@ -603,7 +597,7 @@ fn finish_clusters(
     // The classifier's reference line only needs the trajectory around these clusters.
     let mut candidates = classify::run(&cloud, &clusters, traj, &p.classify);
     // The learned classifier takes the candidates the geometric rules could not decide.
-    super::learned::refine(&mut candidates, &cloud, &super::learned::Params::default())?;
+    super::learned::refine(&mut candidates, &cloud, &p.learned)?;
     ctx.stats.add(5, t0);
     let t0 = Instant::now();
     let pieces = vectorize::outlines(&cloud, &candidates, &p.vectorize);

@@ -110,13 +110,6 @@ pub fn components(xy: &[[f64; 2]], r: f64) -> Vec<Vec<usize>> {
     let ncell = grid.keys.len();
     let cell_id: HashMap<(i64, i64), usize> = grid.keys.iter().enumerate().map(|(i, &k)| (k, i)).collect();
     let mut parent: Vec<usize> = (0..ncell).collect();
-    fn find(parent: &mut [usize], mut a: usize) -> usize {
-        while parent[a] != a {
-            parent[a] = parent[parent[a]];
-            a = parent[a];
-        }
-        a
-    }
     let r2 = r * r;
     let reach = (r / cell).ceil() as i64;
     for (ia, &ka) in grid.keys.iter().enumerate() {
@@ -133,7 +126,7 @@ pub fn components(xy: &[[f64; 2]], r: f64) -> Vec<Vec<usize>> {
                 }
                 let kb = (ka.0 + dx, ka.1 + dy);
                 let Some(&ib) = cell_id.get(&kb) else { continue };
-                let (ra, rb) = (find(&mut parent, ia), find(&mut parent, ib));
+                let (ra, rb) = (find_root(&mut parent, ia), find_root(&mut parent, ib));
                 if ra == rb {
                     continue;
                 }
@@ -152,23 +145,11 @@ pub fn components(xy: &[[f64; 2]], r: f64) -> Vec<Vec<usize>> {
             }
         }
     }
-    let mut groups: HashMap<usize, Vec<usize>> = HashMap::new();
-    for (ic, &k) in grid.keys.iter().enumerate() {
-        let root = find(&mut parent, ic);
-        groups
-            .entry(root)
-            .or_default()
-            .extend(grid.slice(k).expect("cell exists").iter().map(|&i| i as usize));
-    }
-    let mut out: Vec<Vec<usize>> = groups
-        .into_values()
-        .map(|mut g| {
-            g.sort_unstable();
-            g
-        })
-        .collect();
-    out.sort_unstable_by_key(|g| g[0]);
-    out
+    let members = grid
+        .keys
+        .iter()
+        .map(|&k| grid.slice(k).expect("cell exists").iter().map(|&i| i as usize));
+    merge_groups(&mut parent, members)
 }
 
 /// Connected components with a radius that adapts to the local point density: points with
@@ -226,13 +207,6 @@ pub fn components_adaptive(xy: &[[f64; 2]], r_min: f64, r_max: f64, k: usize) ->
     let sxy: Vec<[f64; 2]> = sparse.iter().map(|&i| xy[i]).collect();
     let sgrid = GridIndex::new(&sxy, r_max);
     let mut parent: Vec<usize> = (0..base.len()).collect();
-    fn find(p: &mut [usize], mut a: usize) -> usize {
-        while p[a] != a {
-            p[a] = p[p[a]];
-            a = p[a];
-        }
-        a
-    }
     for (a, &i) in sparse.iter().enumerate() {
         let p = xy[i];
         let key = ((p[0] / r_max).floor() as i64, (p[1] / r_max).floor() as i64);
@@ -248,19 +222,45 @@ pub fn components_adaptive(xy: &[[f64; 2]], r_min: f64, r_max: f64, k: usize) ->
                     }
                     let q = xy[j];
                     if (q[0] - p[0]).hypot(q[1] - p[1]) <= radius[i].min(radius[j]) {
-                        let (ra, rb) = (find(&mut parent, label[i]), find(&mut parent, label[j]));
-                        if ra != rb {
-                            parent[ra.max(rb)] = ra.min(rb);
-                        }
+                        union(&mut parent, label[i], label[j]);
                     }
                 }
             }
         }
     }
+    merge_groups(&mut parent, base)
+}
+
+/// Root of `a` in the union-find forest `parent` (with path halving). The union-find here is
+/// a few lines over plain index vectors, which no dependency of ours offers.
+pub fn find_root(parent: &mut [usize], mut a: usize) -> usize {
+    while parent[a] != a {
+        parent[a] = parent[parent[a]];
+        a = parent[a];
+    }
+    a
+}
+
+/// Join the sets of `a` and `b` (the smaller root index becomes the root, so the result does
+/// not depend on the order of the unions); false when they were already one set.
+pub fn union(parent: &mut [usize], a: usize, b: usize) -> bool {
+    let (ra, rb) = (find_root(parent, a), find_root(parent, b));
+    if ra == rb {
+        return false;
+    }
+    parent[ra.max(rb)] = ra.min(rb);
+    true
+}
+
+/// The members of union-find elements merged per set: `members[e]` belongs to element `e`.
+/// Each group sorted; groups ordered by their first member.
+fn merge_groups<I>(parent: &mut [usize], members: impl IntoIterator<Item = I>) -> Vec<Vec<usize>>
+where
+    I: IntoIterator<Item = usize>,
+{
     let mut groups: HashMap<usize, Vec<usize>> = HashMap::new();
-    for (g, c) in base.into_iter().enumerate() {
-        let r = find(&mut parent, g);
-        groups.entry(r).or_default().extend(c);
+    for (e, m) in members.into_iter().enumerate() {
+        groups.entry(find_root(parent, e)).or_default().extend(m);
     }
     let mut out: Vec<Vec<usize>> = groups
         .into_values()
@@ -271,6 +271,20 @@ pub fn components_adaptive(xy: &[[f64; 2]], r_min: f64, r_max: f64, k: usize) ->
         .collect();
     out.sort_unstable_by_key(|g| g[0]);
     out
+}
+
+/// Linear interpolation of the piecewise-linear function through (`xs[i]`, `ys[i]`) (`xs`
+/// ascending, non-empty) at `x`, held constant beyond the ends.
+pub fn interp_clamped(xs: &[f64], ys: &[f64], x: f64) -> f64 {
+    let j = xs.partition_point(|&v| v < x);
+    if j == 0 {
+        ys[0]
+    } else if j >= xs.len() {
+        ys[xs.len() - 1]
+    } else {
+        let f = (x - xs[j - 1]) / (xs[j] - xs[j - 1]).max(1e-9);
+        ys[j - 1] + f * (ys[j] - ys[j - 1])
+    }
 }
 
 /// Median nearest-neighbour distance of (a deterministic subsample of) the points; a proxy

@@ -481,13 +481,6 @@ fn median_offset_in(so: &[[f64; 2]], a: f64, b: f64) -> Option<f64> {
 fn merge_overlaps(items: Vec<Item>) -> Vec<Item> {
     let n = items.len();
     let mut parent: Vec<usize> = (0..n).collect();
-    fn find(p: &mut [usize], mut a: usize) -> usize {
-        while p[a] != a {
-            p[a] = p[p[a]];
-            a = p[a];
-        }
-        a
-    }
     let ext = |it: &Item| (it.so[0][0], it.so[it.so.len() - 1][0]);
     let mut any = false;
     for i in 0..n {
@@ -509,8 +502,7 @@ fn merge_overlaps(items: Vec<Item>) -> Vec<Item> {
                 continue;
             };
             if (oa - ob).abs() < 0.5 * items[i].width.max(items[j].width) + 0.05 {
-                let (ri, rj) = (find(&mut parent, i), find(&mut parent, j));
-                parent[ri.max(rj)] = ri.min(rj);
+                geom::union(&mut parent, i, j);
                 any = true;
             }
         }
@@ -522,7 +514,7 @@ fn merge_overlaps(items: Vec<Item>) -> Vec<Item> {
     let mut out: Vec<Item> = Vec::new();
     let mut at: Vec<Option<usize>> = vec![None; n];
     for (i, slot) in slots.iter_mut().enumerate() {
-        let r = find(&mut parent, i);
+        let r = geom::find_root(&mut parent, i);
         let it = slot.take().expect("each item once");
         match at[r] {
             None => {

@@ -13,6 +13,7 @@
 //!
 //! Complexity: O(n log n) for the alpha shape of n points; linear for the others.
 
+use super::geom;
 use spade::{DelaunayTriangulation, Point2, Triangulation};
 use std::collections::HashMap;
 
@@ -125,13 +126,6 @@ pub fn alpha_shape(pts: &[[f64; 2]], radius: f64) -> Option<(Vec<[f64; 2]>, f64)
     }
     // Connected pieces of kept triangles (through shared edges).
     let mut parent: Vec<usize> = (0..nf).collect();
-    fn find(p: &mut [usize], mut a: usize) -> usize {
-        while p[a] != a {
-            p[a] = p[p[a]];
-            a = p[a];
-        }
-        a
-    }
     for f in tri.inner_faces() {
         let fi = f.fix().index();
         if !kept[fi] {
@@ -141,8 +135,7 @@ pub fn alpha_shape(pts: &[[f64; 2]], radius: f64) -> Option<(Vec<[f64; 2]>, f64)
             if let Some(o) = e.rev().face().as_inner() {
                 let oi = o.fix().index();
                 if kept[oi] {
-                    let (a, b) = (find(&mut parent, fi), find(&mut parent, oi));
-                    parent[a.max(b)] = a.min(b);
+                    geom::union(&mut parent, fi, oi);
                 }
             }
         }
@@ -153,7 +146,7 @@ pub fn alpha_shape(pts: &[[f64; 2]], radius: f64) -> Option<(Vec<[f64; 2]>, f64)
         if kept[fi] {
             let [a, b, c] = f.positions();
             let area = ((b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x)).abs() / 2.0;
-            *piece_area.entry(find(&mut parent, fi)).or_default() += area;
+            *piece_area.entry(geom::find_root(&mut parent, fi)).or_default() += area;
         }
     }
     let best = piece_area
@@ -166,7 +159,7 @@ pub fn alpha_shape(pts: &[[f64; 2]], radius: f64) -> Option<(Vec<[f64; 2]>, f64)
     let mut nedges = 0usize;
     for f in tri.inner_faces() {
         let fi = f.fix().index();
-        if !kept[fi] || find(&mut parent, fi) != best {
+        if !kept[fi] || geom::find_root(&mut parent, fi) != best {
             continue;
         }
         for v in f.vertices() {

@@ -11,11 +11,12 @@
 //! | `rasterize` | background normalisation + IDW raster | [`super::rasterize`] |
 //! | `threshold` | Bradley–Roth + cleanup + points back | [`super::threshold`] |
 //! | `cluster`, `classify`, `vectorize` | clusters, classes, outlines and lane lines | [`super::cluster`], [`super::classify`], [`super::vectorize`] |
+//! | `learned` | the learned classifier for undecided candidates (`mode`: auto/on/off) | [`super::learned::refine`] |
 //! | `chunk` | chunking along the trajectory for bounded memory | [`super::chunk`] |
 //!
 //! `serde_json::to_string_pretty(&Params::default())` prints the whole default set.
 
-use super::{chunk, classify, cluster, pavement, rasterize, threshold, vectorize};
+use super::{chunk, classify, cluster, learned, pavement, rasterize, threshold, vectorize};
 use serde::{Deserialize, Serialize};
 
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -27,6 +28,7 @@ pub struct Params {
     pub cluster: cluster::Params,
     pub classify: classify::Params,
     pub vectorize: vectorize::Params,
+    pub learned: learned::Params,
     pub chunk: chunk::Params,
 }
 
@@ -51,13 +53,14 @@ impl Params {
     /// Check every stage's parameters and the constraints between stages; the error names
     /// the parameter as `stage.field: problem`.
     pub fn validate(self) -> Result<ValidParams, String> {
-        let checks: [(&str, Result<(), String>); 7] = [
+        let checks: [(&str, Result<(), String>); 8] = [
             ("pavement", self.pavement.validate()),
             ("rasterize", self.rasterize.validate()),
             ("threshold", self.threshold.validate()),
             ("cluster", self.cluster.validate()),
             ("classify", self.classify.validate()),
             ("vectorize", self.vectorize.validate()),
+            ("learned", self.learned.validate()),
             ("chunk", self.chunk.validate()),
         ];
         for (stage, r) in checks {
@@ -112,6 +115,13 @@ mod tests {
         assert!(e.starts_with("chunk.overlap_m"), "{e}");
         let e = Params::from_json(r#"{"threshold": {"nonsense": 1}}"#).unwrap_err();
         assert!(e.contains("nonsense"), "{e}");
+        let e = Params::from_json(r#"{"learned": {"decisive_confidence": 2}}"#)
+            .unwrap()
+            .validate()
+            .unwrap_err();
+        assert!(e.starts_with("learned.decisive_confidence"), "{e}");
+        let p = Params::from_json(r#"{"learned": {"mode": "off"}}"#).unwrap();
+        assert_eq!(p.learned.mode, learned::refine::Mode::Off);
         // NaN cannot be written in JSON; a string where a number belongs is a parse error.
         assert!(Params::from_json(r#"{"rasterize": {"radius_m": "x"}}"#).is_err());
     }

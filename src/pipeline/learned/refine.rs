@@ -70,13 +70,7 @@ impl Default for Params {
 
 impl Params {
     pub fn validate(&self) -> Result<(), String> {
-        if !(0.0..=1.0).contains(&self.decisive_confidence) {
-            return Err(format!(
-                "learned.decisive_confidence must be within 0..=1, got {}",
-                self.decisive_confidence
-            ));
-        }
-        Ok(())
+        crate::pipeline::pavement::check_range("decisive_confidence", self.decisive_confidence, 0.0, 1.0)
     }
 }
 
