@@ -20,6 +20,7 @@
 //! **Complexity.** O(n) copies and at most one write and one read of each point.
 
 use super::error::PipelineError;
+use super::geom::floor_i64;
 use super::types::PointCloud;
 use serde::{Deserialize, Serialize};
 use std::fs::{File, OpenOptions};
@@ -139,13 +140,6 @@ impl Plan {
         };
         lo.max(self.first)..=hi.min(self.last)
     }
-}
-
-/// `v.floor() as i64` without the libm call (`floor` is not inlined without SSE 4.1).
-#[inline]
-fn floor_i64(v: f64) -> i64 {
-    let t = v as i64;
-    if (t as f64) > v { t - 1 } else { t }
 }
 
 /// Points of one chunk: coordinates relative to the job origin, plus their station.
@@ -570,15 +564,6 @@ mod tests {
         assert_eq!(n1 + n2, kept);
         for k in plan.first..=plan.last {
             assert_eq!(one.take(k).unwrap(), many.take(k).unwrap(), "chunk {k}");
-        }
-    }
-
-    #[test]
-    fn floor_matches_the_library() {
-        for v in [
-            -2.5, -2.0, -1e-300, -0.0, 0.0, 0.3, 1.0, 7.999999, -7.000001, 1e15, -1e15,
-        ] {
-            assert_eq!(floor_i64(v), v.floor() as i64, "{v}");
         }
     }
 

@@ -46,6 +46,7 @@
 //! **Complexity.** O(n log n) overall (quantiles per window), parallel over slices; RANSAC
 //! stops adaptively once the inlier ratio makes a better plane unlikely.
 
+use super::geom::floor_i64;
 use super::pavement_scanline;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -185,7 +186,7 @@ pub struct Input<'a> {
 /// Global slice index of a mileage.
 #[inline]
 pub fn slice_of(mileage: f64, slice_length_m: f64) -> i64 {
-    (mileage / slice_length_m).floor() as i64
+    floor_i64(mileage / slice_length_m)
 }
 
 /// Indices (ascending) of the pavement points.
@@ -391,14 +392,14 @@ fn slice_pavement(idx: &[usize], input: &Input<'_>, s_start: f64, slice_id: i64,
     // 1. Pseudo scan points: lowest per (u interval, 0.5 m sub-slice).
     let sub = (p.slice_length_m / 0.5).round().max(1.0);
     let sub_len = p.slice_length_m / sub;
-    let ub = |u: f64| (u / p.pseudo_bin_m).floor() as i64;
+    let ub = |u: f64| floor_i64(u / p.pseudo_bin_m);
     let u_lo = pts.iter().map(|t| ub(t.1)).min().expect("non-empty");
     let u_hi = pts.iter().map(|t| ub(t.1)).max().expect("non-empty");
     let nu = (u_hi - u_lo + 1) as usize;
     let nsub = sub as usize;
     let mut lowest: Vec<Option<[f64; 3]>> = vec![None; nu * nsub];
     for &(_, u, s, z) in &pts {
-        let k = ((s / sub_len).floor().clamp(0.0, sub - 1.0) as usize) * nu + (ub(u) - u_lo) as usize;
+        let k = (floor_i64(s / sub_len).clamp(0, nsub as i64 - 1) as usize) * nu + (ub(u) - u_lo) as usize;
         if lowest[k].is_none_or(|l| z < l[2]) {
             lowest[k] = Some([u, s, z]);
         }
@@ -415,7 +416,7 @@ fn slice_pavement(idx: &[usize], input: &Input<'_>, s_start: f64, slice_id: i64,
         .map(|&(i, u, s, z)| (i, u, z - plane.at(u, s)))
         .collect();
     // 3. Moving windows, centred on the trajectory (window 0 holds u ∈ [-w/2, w/2)).
-    let wi = |u: f64| (u / p.window_m + 0.5).floor() as i64;
+    let wi = |u: f64| floor_i64(u / p.window_m + 0.5);
     let w_lo = res.iter().map(|t| wi(t.1)).min().expect("non-empty");
     let w_hi = res.iter().map(|t| wi(t.1)).max().expect("non-empty");
     let nw = (w_hi - w_lo + 1) as usize;

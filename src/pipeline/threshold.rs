@@ -196,6 +196,11 @@ fn kernel_1d(sigma: f64) -> (i64, Vec<f32>) {
 }
 
 /// [`gaussian_smooth`] with different widths along x (columns) and y (rows).
+///
+/// Both passes run tap-major (for each kernel tap, over a whole row), the horizontal one
+/// on a zero-padded copy of the row, so the inner loops have no bounds checks and
+/// vectorise. Each output still adds its taps in kernel order starting from 0, and the
+/// padding adds exact zeros, so the result equals the direct per-pixel sums bit for bit.
 pub fn gaussian_smooth_xy(img: &Raster<f32>, sigma_x: f64, sigma_y: f64) -> Raster<f32> {
     if (sigma_x <= 0.0 && sigma_y <= 0.0) || img.data.is_empty() {
         return img.clone();
@@ -203,65 +208,76 @@ pub fn gaussian_smooth_xy(img: &Raster<f32>, sigma_x: f64, sigma_y: f64) -> Rast
     let (rx, kx) = kernel_1d(sigma_x);
     let (ry, ky) = kernel_1d(sigma_y);
     let (w, h) = (img.width, img.height);
-    let val: Vec<f32> = img
-        .data
-        .iter()
-        .map(|v| if v.is_finite() { *v } else { 0.0 })
-        .collect();
-    let ok: Vec<f32> = img
-        .data
-        .iter()
-        .map(|v| if v.is_finite() { 1.0 } else { 0.0 })
-        .collect();
-    let horiz = |src: &[f32]| -> Vec<f32> {
-        let mut out = vec![0f32; w * h];
-        out.par_chunks_mut(w).enumerate().for_each(|(r, line)| {
-            let row = &src[r * w..(r + 1) * w];
-            for (c, o) in line.iter_mut().enumerate() {
-                let lo = (c as i64 - rx).max(0) as usize;
-                let hi = ((c as i64 + rx) as usize).min(w - 1);
-                let mut acc = 0f32;
-                for cc in lo..=hi {
-                    acc += kx[(cc as i64 - c as i64 + rx) as usize] * row[cc];
+    let rxu = rx as usize;
+    // Horizontal pass of the valid values and of the validity, per row.
+    let mut hv = vec![0f32; w * h];
+    let mut ho = vec![0f32; w * h];
+    hv.par_chunks_mut(w)
+        .zip(ho.par_chunks_mut(w))
+        .enumerate()
+        .for_each_init(
+            || (vec![0f32; w + 2 * rxu], vec![0f32; w + 2 * rxu]),
+            |(pv, po), (r, (ov, oo))| {
+                for ((v, o), &x) in pv[rxu..rxu + w]
+                    .iter_mut()
+                    .zip(&mut po[rxu..rxu + w])
+                    .zip(&img.data[r * w..(r + 1) * w])
+                {
+                    let ok = x.is_finite();
+                    *v = if ok { x } else { 0.0 };
+                    *o = if ok { 1.0 } else { 0.0 };
                 }
-                *o = acc;
-            }
-        });
-        out
-    };
-    let vert = |src: &[f32]| -> Vec<f32> {
-        let mut out = vec![0f32; w * h];
-        out.par_chunks_mut(w).enumerate().for_each(|(r, line)| {
-            for (k, kv) in ky.iter().enumerate() {
+                for (t, &k) in kx.iter().enumerate() {
+                    for (o, &x) in ov.iter_mut().zip(&pv[t..t + w]) {
+                        *o += k * x;
+                    }
+                    for (o, &x) in oo.iter_mut().zip(&po[t..t + w]) {
+                        *o += k * x;
+                    }
+                }
+            },
+        );
+    // Vertical pass (rows outside the image contribute nothing), then the ratio.
+    let mut data = vec![0f32; w * h];
+    data.par_chunks_mut(w).enumerate().for_each_init(
+        || (vec![0f32; w], vec![0f32; w]),
+        |(sv, so), (r, line)| {
+            sv.fill(0.0);
+            so.fill(0.0);
+            for (k, &kv) in ky.iter().enumerate() {
                 let rr = r as i64 + k as i64 - ry;
                 if rr < 0 || rr as usize >= h {
                     continue;
                 }
-                let row = &src[rr as usize * w..(rr as usize + 1) * w];
-                for (o, s) in line.iter_mut().zip(row) {
-                    *o += kv * s;
+                let at = rr as usize * w;
+                for (o, &x) in sv.iter_mut().zip(&hv[at..at + w]) {
+                    *o += kv * x;
+                }
+                for (o, &x) in so.iter_mut().zip(&ho[at..at + w]) {
+                    *o += kv * x;
                 }
             }
-        });
-        out
-    };
-    let sv = vert(&horiz(&val));
-    let so = vert(&horiz(&ok));
-    let data = img
-        .data
-        .iter()
-        .zip(sv.iter().zip(&so))
-        .map(|(orig, (v, o))| {
-            if orig.is_finite() && *o > 0.0 {
-                v / o
-            } else {
-                f32::NAN
+            for (((d, &orig), &v), &o) in line
+                .iter_mut()
+                .zip(&img.data[r * w..(r + 1) * w])
+                .zip(sv.iter())
+                .zip(so.iter())
+            {
+                *d = if orig.is_finite() && o > 0.0 {
+                    v / o
+                } else {
+                    f32::NAN
+                };
             }
-        })
-        .collect();
+        },
+    );
     Raster {
+        col0: img.col0,
+        row0: img.row0,
+        cell_m: img.cell_m,
+        width: w,
+        height: h,
         data,
-        ..img.map(|_| 0f32)
     }
 }
 
@@ -279,21 +295,36 @@ pub struct IntegralImage {
 }
 
 impl IntegralImage {
+    /// Row prefix sums in parallel, then each row adds the finished row above it (a
+    /// sequential but vectorised pass): the same additions as the textbook recurrence.
     pub fn new(img: &Raster<f32>) -> Self {
         let (w, h) = (img.width, img.height);
         let stride = w + 1;
         let mut sum = vec![0f64; stride * (h + 1)];
         let mut count = vec![0u32; stride * (h + 1)];
-        for r in 0..h {
-            let (mut rs, mut rc) = (0f64, 0u32);
-            for c in 0..w {
-                let v = img.data[r * w + c];
-                if v.is_finite() {
-                    rs += v as f64;
-                    rc += 1;
+        sum[stride..]
+            .par_chunks_mut(stride)
+            .zip(count[stride..].par_chunks_mut(stride))
+            .enumerate()
+            .for_each(|(r, (srow, crow))| {
+                let (mut rs, mut rc) = (0f64, 0u32);
+                for (c, &v) in img.data[r * w..(r + 1) * w].iter().enumerate() {
+                    if v.is_finite() {
+                        rs += v as f64;
+                        rc += 1;
+                    }
+                    srow[c + 1] = rs;
+                    crow[c + 1] = rc;
                 }
-                sum[(r + 1) * stride + c + 1] = sum[r * stride + c + 1] + rs;
-                count[(r + 1) * stride + c + 1] = count[r * stride + c + 1] + rc;
+            });
+        for r in 1..h {
+            let (above, rest) = sum[r * stride..].split_at_mut(stride);
+            for (x, &a) in rest[..stride].iter_mut().zip(above.iter()) {
+                *x += a;
+            }
+            let (above, rest) = count[r * stride..].split_at_mut(stride);
+            for (x, &a) in rest[..stride].iter_mut().zip(above.iter()) {
+                *x += a;
             }
         }
         Self { w, h, sum, count }
@@ -320,7 +351,12 @@ impl IntegralImage {
 
 /// Bradley–Roth: foreground (1) where `I > mean((2s+1)² window) · t` and `I ≥ min_contrast`.
 pub fn bradley_roth(img: &Raster<f32>, s: u32, t: f64, min_contrast: f64) -> Raster<u8> {
-    let ii = IntegralImage::new(img);
+    bradley_roth_with(img, &IntegralImage::new(img), s, t, min_contrast)
+}
+
+/// [`bradley_roth`] with the image's integral image already built (it does not depend on
+/// `t` or `min_contrast`, so the strong and weak detections share it).
+fn bradley_roth_with(img: &Raster<f32>, ii: &IntegralImage, s: u32, t: f64, min_contrast: f64) -> Raster<u8> {
     let s = s as i64;
     let w = img.width;
     let mut out = img.map(|_| 0u8);
@@ -482,10 +518,14 @@ pub fn segment(img: &Raster<f32>, p: &Params) -> Segmentation {
     // contrast above the asphalt texture, which has no preferred direction.
     let along =
         (p.along_sigma_px > 0.0).then(|| gaussian_smooth_xy(img, p.along_sigma_px, p.across_sigma_px));
+    let (ii_smooth, ii_along) = rayon::join(
+        || IntegralImage::new(&smooth),
+        || along.as_ref().map(IntegralImage::new),
+    );
     let detect = |t: f64, floor: f64| {
-        let mut m = bradley_roth(&smooth, p.window_radius_px, t, floor);
-        if let Some(a) = &along {
-            let m2 = bradley_roth(a, p.window_radius_px, t, floor);
+        let mut m = bradley_roth_with(&smooth, &ii_smooth, p.window_radius_px, t, floor);
+        if let (Some(a), Some(ia)) = (&along, &ii_along) {
+            let m2 = bradley_roth_with(a, ia, p.window_radius_px, t, floor);
             for (x, y) in m.data.iter_mut().zip(&m2.data) {
                 *x |= *y;
             }
@@ -587,6 +627,106 @@ pub fn points_from_mask(seg: &Segmentation, xs: &[f64], ys: &[f64], values: &[f3
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    /// The previous per-pixel separable blur: the reference [`gaussian_smooth_xy`] must
+    /// equal bit for bit.
+    fn gaussian_reference(img: &Raster<f32>, sigma_x: f64, sigma_y: f64) -> Raster<f32> {
+        if (sigma_x <= 0.0 && sigma_y <= 0.0) || img.data.is_empty() {
+            return img.clone();
+        }
+        let (rx, kx) = kernel_1d(sigma_x);
+        let (ry, ky) = kernel_1d(sigma_y);
+        let (w, h) = (img.width, img.height);
+        let val: Vec<f32> = img
+            .data
+            .iter()
+            .map(|v| if v.is_finite() { *v } else { 0.0 })
+            .collect();
+        let ok: Vec<f32> = img
+            .data
+            .iter()
+            .map(|v| if v.is_finite() { 1.0 } else { 0.0 })
+            .collect();
+        let horiz = |src: &[f32]| -> Vec<f32> {
+            let mut out = vec![0f32; w * h];
+            out.par_chunks_mut(w).enumerate().for_each(|(r, line)| {
+                let row = &src[r * w..(r + 1) * w];
+                for (c, o) in line.iter_mut().enumerate() {
+                    let lo = (c as i64 - rx).max(0) as usize;
+                    let hi = ((c as i64 + rx) as usize).min(w - 1);
+                    let mut acc = 0f32;
+                    for cc in lo..=hi {
+                        acc += kx[(cc as i64 - c as i64 + rx) as usize] * row[cc];
+                    }
+                    *o = acc;
+                }
+            });
+            out
+        };
+        let vert = |src: &[f32]| -> Vec<f32> {
+            let mut out = vec![0f32; w * h];
+            out.par_chunks_mut(w).enumerate().for_each(|(r, line)| {
+                for (k, kv) in ky.iter().enumerate() {
+                    let rr = r as i64 + k as i64 - ry;
+                    if rr < 0 || rr as usize >= h {
+                        continue;
+                    }
+                    let row = &src[rr as usize * w..(rr as usize + 1) * w];
+                    for (o, s) in line.iter_mut().zip(row) {
+                        *o += kv * s;
+                    }
+                }
+            });
+            out
+        };
+        let sv = vert(&horiz(&val));
+        let so = vert(&horiz(&ok));
+        let data = img
+            .data
+            .iter()
+            .zip(sv.iter().zip(&so))
+            .map(|(orig, (v, o))| {
+                if orig.is_finite() && *o > 0.0 {
+                    v / o
+                } else {
+                    f32::NAN
+                }
+            })
+            .collect();
+        Raster {
+            data,
+            ..img.map(|_| 0f32)
+        }
+    }
+
+    #[test]
+    fn smoothing_equals_the_per_pixel_sums() {
+        let mut state = 7u64;
+        let mut rnd = move || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 33) as f32 / (1u64 << 31) as f32
+        };
+        let vals: Vec<f32> = (0..97 * 41)
+            .map(|_| {
+                let v = rnd();
+                if v < 0.2 { f32::NAN } else { 5.0 * v - 0.5 }
+            })
+            .collect();
+        let img = raster(97, 41, |x, y| vals[y * 97 + x]);
+        for (sx, sy) in [(1.0, 1.0), (4.0, 0.7), (0.0, 2.0), (3.0, 0.0), (20.0, 10.0)] {
+            let a = gaussian_smooth_xy(&img, sx, sy);
+            let b = gaussian_reference(&img, sx, sy);
+            assert_eq!(
+                (a.width, a.height, a.col0, a.row0),
+                (b.width, b.height, b.col0, b.row0)
+            );
+            for (u, v) in a.data.iter().zip(&b.data) {
+                assert_eq!(u.to_bits(), v.to_bits(), "sigma ({sx}, {sy}): {u} vs {v}");
+            }
+        }
+    }
 
     fn raster(w: usize, h: usize, f: impl Fn(usize, usize) -> f32) -> Raster<f32> {
         let mut r = Raster::new(0, 0, 0.05, w, h, 0f32);
