@@ -383,20 +383,21 @@ fn marking_points(
         threshold::Method::Adaptive => {
             ctx.progress.report("rasterize", base + 0.25 * step);
             let t0 = Instant::now();
-            let gather_f64 = |v: &[f64]| pav.iter().map(|&i| v[i]).collect::<Vec<f64>>();
+            // Columns of the pavement points, gathered in parallel (one pass each).
+            let gather_f64 = |v: &[f64]| pav.par_iter().map(|&i| v[i]).collect::<Vec<f64>>();
             // The raster lives in trajectory coordinates (x = mileage, y = offset): lines run
             // along its rows, the along-track detector is a separable filter, and the grid
             // is global along the drive.
             // Only the mask lives in this frame: the marking points handed on keep their
             // local x/y (see the end of this function), which cluster/classify/vectorize use.
             let (px, offs) = (gather_f64(&c.mileage), gather_f64(&c.offset));
-            let py = offs.clone();
+            let py = &offs;
             let slice: Vec<i64> = pav
-                .iter()
+                .par_iter()
                 .map(|&i| pavement::slice_of(c.mileage[i], p.pavement.slice_length_m))
                 .collect();
-            let intensity: Vec<f32> = pav.iter().map(|&i| c.intensity[i]).collect();
-            let scanner: Vec<u8> = pav.iter().map(|&i| c.scanner[i]).collect();
+            let intensity: Vec<f32> = pav.par_iter().map(|&i| c.intensity[i]).collect();
+            let scanner: Vec<u8> = pav.par_iter().map(|&i| c.scanner[i]).collect();
             let values = rasterize::normalise(
                 &rasterize::BackgroundInput {
                     intensity: &intensity,
@@ -406,14 +407,14 @@ fn marking_points(
                 },
                 &p.rasterize,
             );
-            let raster = rasterize::idw(&px, &py, &values, &p.rasterize);
+            let raster = rasterize::idw(&px, py, &values, &p.rasterize);
             ctx.stats.add(2, t0);
             ctx.check()?;
             ctx.progress.report("threshold", base + 0.5 * step);
             let t0 = Instant::now();
             let seg = threshold::segment(&raster, &p.threshold);
             drop(raster);
-            let marks = threshold::points_from_mask(&seg, &px, &py, &values, &p.threshold);
+            let marks = threshold::points_from_mask(&seg, &px, py, &values, &p.threshold);
             ctx.stats.add(3, t0);
             ctx.check()?;
             marks
