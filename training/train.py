@@ -16,7 +16,8 @@ farthest-point order the Rust side produced stays valid):
 * scale x(0.95..1.05), per-point jitter of 1 cm, intensity-feature noise.
 
 Sampling is class-balanced (each class drawn equally often); the loss is cross-entropy with
-label smoothing 0.05; AdamW, cosine learning-rate schedule; CPU, deterministic for a seed.
+label smoothing 0.05; AdamW, linear warm-up then cosine learning-rate schedule; CPU,
+deterministic for a seed.
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ from torch import nn
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from metrics import calibrate_threshold, confusion, report  # noqa: E402
-from model import CLASSES, MIRROR, MarkingNet  # noqa: E402
+from model import CLASSES, MIRROR, MarkingNet, Symmetrized  # noqa: E402
 
 MIRROR_IDX = np.arange(len(CLASSES))
 for a, b in MIRROR.items():
@@ -85,11 +86,13 @@ def augment(x: np.ndarray, y: np.ndarray, rng: np.random.Generator) -> tuple[np.
 
 
 def predict(net: nn.Module, x: np.ndarray, batch: int = 256) -> np.ndarray:
+    """Probabilities of the exported graph (``model.Symmetrized``, export.py's default)."""
     net.eval()
+    sym = Symmetrized(net).eval()
     out = []
     with torch.no_grad():
         for i in range(0, len(x), batch):
-            out.append(torch.softmax(net(torch.from_numpy(x[i : i + batch])), -1).numpy())
+            out.append(sym(torch.from_numpy(x[i : i + batch])).numpy())
     return np.concatenate(out) if out else np.zeros((0, len(CLASSES)), np.float32)
 
 
@@ -104,6 +107,7 @@ def main() -> None:
     ap.add_argument("--lr", type=float, default=2e-3)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--warmup", type=int, default=200, help="linear learning-rate warm-up steps")
     args = ap.parse_args()
 
     torch.manual_seed(args.seed)
@@ -124,7 +128,15 @@ def main() -> None:
     net = MarkingNet()
     opt = torch.optim.AdamW(net.parameters(), lr=args.lr, weight_decay=1e-4)
     total = args.epochs * args.steps_per_epoch
-    sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda k: 0.5 * (1 + math.cos(math.pi * min(k, total) / total)))
+    warm = max(args.warmup, 0)
+
+    def lr_factor(k: int) -> float:
+        if k < warm:
+            return (k + 1) / warm
+        t = min(k - warm, total - warm) / max(total - warm, 1)
+        return 0.5 * (1 + math.cos(math.pi * t))
+
+    sched = torch.optim.lr_scheduler.LambdaLR(opt, lr_factor)
     loss_fn = nn.CrossEntropyLoss(label_smoothing=0.05)
     os.makedirs(args.out, exist_ok=True)
     best = (-1.0, -1)
@@ -143,14 +155,18 @@ def main() -> None:
             loss.backward()
             opt.step()
             sched.step()
-            running += float(loss)
+            running += loss.item()
         probs = predict(net, vx)
         cm = confusion(vy, probs.argmax(1), len(CLASSES))
-        macro = report(cm, CLASSES, quiet=True)["macro_f1"]
+        rep = report(cm, CLASSES, quiet=True)
+        macro = rep["macro_f1"]
         log.append({"epoch": epoch, "loss": running / args.steps_per_epoch, "val_macro_f1": macro,
-                    "seconds": time.time() - t0})
+                    "val_f1": rep["f1"], "seconds": time.time() - t0})
+        present_val = [i for i in range(len(CLASSES)) if rep["support"][i]]
+        worst = sorted(present_val, key=lambda i: rep["f1"][i])[:3]
         print(f"epoch {epoch:2d} loss {running / args.steps_per_epoch:.4f} val macro-F1 {macro:.4f} "
-              f"({time.time() - t0:.0f} s)", flush=True)
+              f"({time.time() - t0:.0f} s); worst " + ", ".join(f"{CLASSES[i]} {rep['f1'][i]:.3f}" for i in worst),
+              flush=True)
         if macro >= best[0]:
             best = (macro, epoch)
             torch.save(net.state_dict(), os.path.join(args.out, "model.pt"))
