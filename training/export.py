@@ -26,7 +26,7 @@ import torch
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from model import CLASSES, N_POINTS, MarkingNet, Symmetrized, WithSoftmax  # noqa: E402
 
-FEATURE_VERSION = "1"
+FEATURE_VERSION = "2"
 
 
 def export(net: MarkingNet, out: str, unknown_threshold: float, extra_meta: dict[str, str],
