@@ -65,9 +65,7 @@ fn fill_marking(cloud: &mut PointCloud, m: &markings::MarkingDef) -> Vec<usize> 
 
 /// One fixture per class the network alone decides (arrows, diamond), drawn by the
 /// simulator's own shape generator (GB dimensions) with its forward axis along `heading`
-/// (radians from east). Dashes are left out on purpose: the geometric rules decide them, and
-/// the shipped model calls a clean synthetic 4–6 m dash on this 4 cm grid a straight arrow
-/// (known weakness, see models/README.md).
+/// (radians from east). Dashes: [`dashes`].
 fn fixtures(cloud: &mut PointCloud, heading: f64, at: [f64; 2]) -> Vec<(MarkingClass, Vec<usize>)> {
     let st = Standard::parse("gb").unwrap();
     let (s, c) = heading.sin_cos();
@@ -86,6 +84,22 @@ fn fixtures(cloud: &mut PointCloud, heading: f64, at: [f64; 2]) -> Vec<(MarkingC
         markings::diamond(&frame(6.0), dl, dw, dlw),
     ];
     shapes.iter().map(|m| (m.class, fill_marking(cloud, m))).collect()
+}
+
+/// Clean 2, 4 and 6 m dashes (0.15 m wide) along `heading`, placed after the [`fixtures`].
+fn dashes(cloud: &mut PointCloud, heading: f64, at: [f64; 2]) -> Vec<(MarkingClass, Vec<usize>)> {
+    let (s, c) = heading.sin_cos();
+    [(8.0, 2.0), (9.0, 4.0), (10.0, 6.0)]
+        .iter()
+        .map(|&(k, len)| {
+            let (cx, cy) = (at[0] + k * 15.0 * c, at[1] + k * 15.0 * s);
+            let poly: Vec<[f64; 2]> = rect(0.0, 0.0, len, 0.15)
+                .iter()
+                .map(|p| [cx + p[0] * c - p[1] * s, cy + p[0] * s + p[1] * c])
+                .collect();
+            (MarkingClass::DashedLine, fill(cloud, &poly, 0.0))
+        })
+        .collect()
 }
 
 fn inside(poly: &[[f64; 2]], x: f64, y: f64) -> bool {
@@ -209,7 +223,8 @@ fn fixed_clusters_get_their_classes_at_any_heading() {
     for heading_deg in [0.0f64, 37.0, 180.0, 251.0] {
         let h = heading_deg.to_radians();
         let mut cloud = PointCloud::with_origin([500_000.0, 4_000_000.0, 10.0]);
-        let fx = fixtures(&mut cloud, h, [3.0, -7.0]);
+        let mut fx = fixtures(&mut cloud, h, [3.0, -7.0]);
+        fx.extend(dashes(&mut cloud, h, [3.0, -7.0]));
         let views: Vec<ClusterPoints> = fx
             .iter()
             .map(|(_, idx)| ClusterPoints {

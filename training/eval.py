@@ -29,6 +29,8 @@ def main() -> None:
     ap.add_argument("--data", required=True)
     ap.add_argument("--batch", type=int, default=32)
     ap.add_argument("--json", help="also write the scores here")
+    ap.add_argument("--errors", action="store_true",
+                    help="list the misclassified clusters (clusters.csv rows: survey, marking, damage)")
     args = ap.parse_args()
     so = ort.SessionOptions()
     so.intra_op_num_threads = 1
@@ -52,6 +54,17 @@ def main() -> None:
     r1 = report(confusion(y, probs.argmax(1), len(classes)), classes)
     print(f"\n== with the unknown threshold {threshold:.3f} ==")
     r2 = report(confusion(y, decide(probs, classes.index("unknown"), threshold), len(classes)), classes)
+    if args.errors:
+        import csv
+
+        with open(os.path.join(args.data, "clusters.csv")) as f:
+            rows = list(csv.DictReader(f))
+        pred = decide(probs, classes.index("unknown"), threshold)
+        print("\nmisclassified (thresholded): truth -> prediction (p), survey, marking, points, damage")
+        for i in np.flatnonzero(pred != y):
+            r = rows[i]
+            print(f"{classes[y[i]]:>20} -> {classes[pred[i]]:<20} ({probs[i].max():.2f}) {r['survey']} "
+                  f"{r['marking']} {r['points']} {r['damage']}")
     if args.json:
         with open(args.json, "w") as f:
             json.dump({"classes": classes, "argmax": r1, "thresholded": r2, "threshold": threshold}, f, indent=1)

@@ -6,7 +6,9 @@
 The file has one input ``points`` [batch, 256, 4] (dynamic batch), one output ``probs``
 [batch, classes], opset 18, weights inline (no external data), and the metadata keys
 ``roadmark.classes``, ``roadmark.points``, ``roadmark.features``,
-``roadmark.unknown_threshold`` that ``src/pipeline/learned/mod.rs`` checks on load.
+``roadmark.unknown_threshold`` that ``src/pipeline/learned/mod.rs`` checks on load (and the
+informative ``roadmark.symmetrized``). By default the graph averages the network over the
+road's symmetries (``model.Symmetrized``).
 With onnxruntime importable, the exported graph is checked against torch on random input.
 """
 
@@ -22,14 +24,15 @@ import onnx
 import torch
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from model import CLASSES, N_POINTS, MarkingNet, WithSoftmax  # noqa: E402
+from model import CLASSES, N_POINTS, MarkingNet, Symmetrized, WithSoftmax  # noqa: E402
 
-FEATURE_VERSION = "1"
+FEATURE_VERSION = "2"
 
 
-def export(net: MarkingNet, out: str, unknown_threshold: float, extra_meta: dict[str, str]) -> None:
+def export(net: MarkingNet, out: str, unknown_threshold: float, extra_meta: dict[str, str],
+           symmetrize: bool = True) -> None:
     net.eval()
-    wrapped = WithSoftmax(net).eval()
+    wrapped = (Symmetrized(net) if symmetrize else WithSoftmax(net)).eval()
     example = torch.zeros(2, N_POINTS, 4)
     batch = torch.export.Dim("batch", min=1, max=4096)
     program = torch.onnx.export(
@@ -50,6 +53,7 @@ def export(net: MarkingNet, out: str, unknown_threshold: float, extra_meta: dict
         "roadmark.points": str(N_POINTS),
         "roadmark.features": FEATURE_VERSION,
         "roadmark.unknown_threshold": f"{unknown_threshold:.3f}",
+        "roadmark.symmetrized": "1" if symmetrize else "0",
         **extra_meta,
     }
     del model.metadata_props[:]
@@ -86,6 +90,9 @@ def main() -> None:
     ap.add_argument("--out", required=True)
     ap.add_argument("--unknown-threshold", type=float, default=None,
                     help="default: the value calibrated by train.py (calibration.json beside the checkpoint)")
+    ap.add_argument("--no-symmetrize", action="store_true",
+                    help="export the bare network (default: the mean over the 180 deg turn and the "
+                         "mirror image, model.Symmetrized)")
     args = ap.parse_args()
     torch.manual_seed(0)
     net = MarkingNet()
@@ -103,7 +110,7 @@ def main() -> None:
         extra["roadmark.note"] = "untrained placeholder"
     if args.unknown_threshold is not None:
         threshold = args.unknown_threshold
-    export(net, args.out, threshold, extra)
+    export(net, args.out, threshold, extra, symmetrize=not args.no_symmetrize)
 
 
 if __name__ == "__main__":

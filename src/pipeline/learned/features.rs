@@ -12,9 +12,13 @@
 //!    by [`COORD_SCALE_M`]. The frame is metric (no per-cluster scaling) because size tells a
 //!    2 m dash from a 6 m one; it is tied to the trajectory, not to the cluster's own axis,
 //!    because a guideline stripe is told from a dash by its angle to the road.
-//! 2. `dz` = (z − median z) / [`Z_SCALE_M`], clipped to ±[`FEATURE_CLIP`]: paint is flat, clutter
-//!    is not. `intensity` = I / median I − 1, clipped to ±1: a ratio, so sensors with other
-//!    intensity scales and range fall-off do not matter.
+//! 2. `dz` = height above the cluster's least-squares plane z = a + b·along + c·across, divided
+//!    by [`Z_SCALE_M`] and clipped to ±[`FEATURE_CLIP`]: paint is flat, clutter is not. The
+//!    plane, not the median, is the reference so that the road's crossfall and grade (which
+//!    say where a marking lies, not what it is) do not reach the network; a cluster too small
+//!    or too thin for a plane falls back to its median height. `intensity` = I / median I − 1,
+//!    clipped to ±1: a ratio, so sensors with other intensity scales and range fall-off do
+//!    not matter.
 //! 3. **Farthest-point sampling** (PointNet++, Qi et al. 2017) in the (along, across) plane,
 //!    starting from the point nearest the centroid (so the order does not depend on the input
 //!    order and is invariant under rotations and mirroring of the cluster). The first `k`
@@ -48,7 +52,7 @@ pub const FEATURE_CLIP: f64 = 4.0;
 /// Larger clusters are thinned by a stride before sampling (bounds the O(m·n) cost).
 pub const MAX_FPS_INPUT: usize = 8192;
 /// Version of this feature recipe; the model's metadata must name the same.
-pub const FEATURE_VERSION: &str = "1";
+pub const FEATURE_VERSION: &str = "2";
 
 /// The points of one cluster and the driving direction there.
 #[derive(Clone, Copy, Debug)]
@@ -95,8 +99,6 @@ pub fn prepare(cluster: &ClusterPoints<'_>, n: usize, out: &mut [f32]) {
         }
         (sx / m as f64, sy / m as f64)
     };
-    let mut zs: Vec<f64> = idx.iter().map(|&i| cloud.z[i]).collect();
-    let z_med = median(&mut zs);
     let mut is: Vec<f64> = idx.iter().map(|&i| cloud.intensity[i] as f64).collect();
     let i_med = median(&mut is).max(1e-6);
 
@@ -107,6 +109,8 @@ pub fn prepare(cluster: &ClusterPoints<'_>, n: usize, out: &mut [f32]) {
         along.push((px * dx + py * dy) / COORD_SCALE_M);
         across.push((dx * py - dy * px) / COORD_SCALE_M);
     }
+    let zs: Vec<f64> = idx.iter().map(|&i| cloud.z[i]).collect();
+    let plane = ground_plane(&along, &across, &zs);
     let order = farthest_point_order(&along, &across, n.min(m));
     for k in 0..n {
         let j = order[k % order.len()];
@@ -114,7 +118,8 @@ pub fn prepare(cluster: &ClusterPoints<'_>, n: usize, out: &mut [f32]) {
         let row = &mut out[k * FEATURES_PER_POINT..(k + 1) * FEATURES_PER_POINT];
         row[0] = along[j] as f32;
         row[1] = across[j] as f32;
-        row[2] = ((cloud.z[i] - z_med) / Z_SCALE_M).clamp(-FEATURE_CLIP, FEATURE_CLIP) as f32;
+        let base = plane[0] + plane[1] * along[j] + plane[2] * across[j];
+        row[2] = ((cloud.z[i] - base) / Z_SCALE_M).clamp(-FEATURE_CLIP, FEATURE_CLIP) as f32;
         row[3] = (cloud.intensity[i] as f64 / i_med - 1.0).clamp(-1.0, 1.0) as f32;
     }
 }
@@ -161,6 +166,40 @@ pub fn farthest_point_order(xs: &[f64], ys: &[f64], k: usize) -> Vec<usize> {
         cur = far;
     }
     order
+}
+
+/// Least-squares plane `z = a + b·u + c·v` through the points, as `[a, b, c]` (`u`, `v` centred
+/// on their mean, which the feature frame is). Falls back to the flat plane at the median
+/// height when the 2 × 2 system is near-singular (fewer than three points, or all of them on
+/// a line), so a thin line does not get an arbitrary tilt across itself.
+fn ground_plane(u: &[f64], v: &[f64], z: &[f64]) -> [f64; 3] {
+    let m = z.len();
+    let mut zs = z.to_vec();
+    let z_med = median(&mut zs);
+    if m < 3 {
+        return [z_med, 0.0, 0.0];
+    }
+    let (mut suu, mut suv, mut svv, mut suz, mut svz, mut sz) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    for k in 0..m {
+        let dz = z[k] - z_med;
+        suu += u[k] * u[k];
+        suv += u[k] * v[k];
+        svv += v[k] * v[k];
+        suz += u[k] * dz;
+        svz += v[k] * dz;
+        sz += dz;
+    }
+    let det = suu * svv - suv * suv;
+    // det / (suu·svv) = 1 − correlation² of u and v: near 0 only for collinear point sets.
+    // Both axes must spread by more than 1 mm RMS (u, v are in COORD_SCALE_M units).
+    let min_sq = (1e-3 / COORD_SCALE_M).powi(2) * m as f64;
+    if suu < min_sq || svv < min_sq || det <= 1e-9 * suu * svv {
+        return [z_med, 0.0, 0.0];
+    }
+    let b = (suz * svv - svz * suv) / det;
+    let c = (svz * suu - suz * suv) / det;
+    // u, v are centred, so the intercept is the mean height.
+    [z_med + sz / m as f64, b, c]
 }
 
 /// Median of a non-empty slice (reorders it). NaNs sort last.
@@ -252,6 +291,69 @@ mod tests {
         for (a, b) in out.chunks(4).zip(south.chunks(4)) {
             assert!((a[0] + b[0]).abs() < 1e-6 && (a[1] + b[1]).abs() < 1e-6);
         }
+    }
+
+    #[test]
+    fn road_tilt_does_not_reach_the_height_feature() {
+        // A 3 × 1 m patch of paint on a road with 2.5 % crossfall and 3 % grade, with a 6 cm
+        // bump (clutter) on one corner: dz is ~0 on the paint, the bump stands out.
+        let mut pts = Vec::new();
+        for i in 0..60 {
+            for j in 0..20 {
+                let (x, y) = (i as f64 * 0.05, j as f64 * 0.05);
+                let bump = if i >= 55 && j >= 15 { 0.06 } else { 0.0 };
+                pts.push((x, y, 0.03 * x + 0.025 * y + bump, 1000.0));
+            }
+        }
+        let c = cloud(&pts);
+        let idx: Vec<usize> = (0..pts.len()).collect();
+        let n = 256;
+        let mut out = vec![0.0; n * FEATURES_PER_POINT];
+        prepare(
+            &ClusterPoints {
+                cloud: &c,
+                indices: &idx,
+                direction: [1.0, 0.0],
+            },
+            n,
+            &mut out,
+        );
+        let mut flat = 0;
+        for r in out.chunks(4) {
+            // Bump points: along ≥ 1.275 m, across ≥ 0.275 m from the centroid (1.475, 0.475).
+            let on_bump = r[0] as f64 * COORD_SCALE_M > 1.25 && r[1] as f64 * COORD_SCALE_M > 0.25;
+            if on_bump {
+                assert!(r[2] > 0.4, "{r:?}");
+            } else if (r[0] as f64 * COORD_SCALE_M) < 0.9 {
+                assert!(r[2].abs() < 0.1, "{r:?}");
+                flat += 1;
+            }
+        }
+        assert!(flat > 100, "{flat}");
+        // A single row of points (no extent across) falls back to the median height.
+        let row: Vec<_> = (0..50)
+            .map(|i| (i as f64 * 0.1, 0.0, 0.01 * i as f64, 1000.0))
+            .collect();
+        let c = cloud(&row);
+        let idx: Vec<usize> = (0..row.len()).collect();
+        let mut out = vec![0.0; 64 * FEATURES_PER_POINT];
+        prepare(
+            &ClusterPoints {
+                cloud: &c,
+                indices: &idx,
+                direction: [1.0, 0.0],
+            },
+            64,
+            &mut out,
+        );
+        assert!(
+            out.chunks(4)
+                .all(|r| r[2].is_finite() && r[2].abs() <= FEATURE_CLIP as f32)
+        );
+        assert!(
+            out.chunks(4).any(|r| r[2].abs() > 1.0),
+            "median fallback keeps the slope"
+        );
     }
 
     #[test]

@@ -16,7 +16,10 @@
 //! 3. The network (`training/model.py`) groups points around the first 64 and first 16 points
 //!    of the input (the FPS prefixes) with k-nearest neighbours, two set-abstraction levels and
 //!    a global one, and ends in a softmax over the classes named in the model's metadata.
-//!    A prediction whose top probability is below the calibrated threshold
+//!    The shipped graph averages the probabilities of the cluster, the cluster turned by
+//!    180° and both mirrored across the driving direction (left/right arrow classes swapped
+//!    back), so its answer is exactly invariant under the road's symmetries (the features and
+//!    their farthest-point order are equivariant under them). A prediction whose top probability is below the calibrated threshold
 //!    (`roadmark.unknown_threshold` in the metadata) is `unknown`.
 //!
 //! # Model file contract (metadata keys of the ONNX model)
@@ -36,8 +39,8 @@
 //! with it (see `papers/README.md`). Training recipe and held-out scores: `models/README.md`.
 //!
 //! # Complexity
-//! Per cluster O(m·n) feature preparation plus one network evaluation (≈ 0.3 M
-//! multiply-adds per point); memory O(batch · n) per worker plus one session per worker.
+//! Per cluster O(m·n) feature preparation plus four network evaluations (≈ 0.3 M
+//! multiply-adds per point each); memory O(batch · n) per worker plus one session per worker.
 
 pub mod features;
 pub mod refine;
