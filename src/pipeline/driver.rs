@@ -414,7 +414,9 @@ fn marking_points(
             let t0 = Instant::now();
             let seg = threshold::segment(&raster, &p.threshold);
             drop(raster);
-            let marks = threshold::points_from_mask(&seg, &px, py, &values, &p.threshold);
+            let mut marks = threshold::points_from_mask(&seg, &px, py, &values, &p.threshold);
+            let z = gather_f64(&c.z);
+            threshold::clear_unflat(&px, py, &z, &mut marks, &p.threshold);
             ctx.stats.add(3, t0);
             ctx.check()?;
             marks

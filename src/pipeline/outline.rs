@@ -276,6 +276,38 @@ pub fn buffered_line(line: &[[f64; 2]], half_width: f64) -> Vec<[f64; 2]> {
     ring
 }
 
+/// The outline of a centreline buffered by `half_width` (flat ends, mitred joins) that is
+/// always a valid simple polygon: [`buffered_line`] when its ring is simple, otherwise the
+/// union of the buffered segments (geo's buffer, which resolves the fold of a centreline
+/// that bends back on itself) — never a convex hull, which for a long bent line would
+/// cover metres of bare asphalt. The largest part's exterior is returned; empty when the
+/// line is degenerate.
+pub fn buffered_line_simple(line: &[[f64; 2]], half_width: f64) -> Vec<[f64; 2]> {
+    use geo::Buffer;
+    use geo::algorithm::buffer::{BufferStyle, LineCap, LineJoin};
+    let ring = buffered_line(line, half_width);
+    if ring.len() >= 3 && is_simple(&ring) {
+        return ring;
+    }
+    let ls: geo::LineString<f64> = line.iter().map(|p| geo::coord! {x: p[0], y: p[1]}).collect();
+    let style = BufferStyle::new(half_width)
+        .line_cap(LineCap::Butt)
+        .line_join(LineJoin::Miter(2.0));
+    let mp = ls.buffer_with_style(style);
+    let best = mp.0.iter().max_by(|a, b| {
+        use geo::Area;
+        a.unsigned_area().total_cmp(&b.unsigned_area())
+    });
+    let Some(poly) = best else {
+        return Vec::new();
+    };
+    let mut out: Vec<[f64; 2]> = poly.exterior().coords().map(|c| [c.x, c.y]).collect();
+    if out.len() > 1 && out[0] == out[out.len() - 1] {
+        out.pop();
+    }
+    out
+}
+
 /// True when the closed ring (not repeated first vertex) has no two non-adjacent edges
 /// that touch or cross: a valid simple polygon boundary. O(n²) over the n edges (outlines
 /// have tens to a few hundred vertices).
@@ -377,5 +409,32 @@ mod tests {
             let r = q[0].hypot(q[1] - 100.0);
             assert!((r - 100.0).abs() < 0.0751 && (r - 100.0).abs() > 0.0749, "{r}");
         }
+    }
+
+    #[test]
+    fn a_folded_centreline_gets_a_thin_valid_outline_not_a_hull() {
+        // A 10 m line that turns back on itself 0.05 m beside its start (a zigzag cluster).
+        let line = vec![
+            [0.0, 0.0],
+            [10.0, 0.0],
+            [10.0, 0.05],
+            [0.0, 0.05],
+            [0.0, 0.1],
+            [10.0, 0.1],
+        ];
+        let ring = buffered_line(&line, 0.075);
+        assert!(!is_simple(&ring), "the plain ring folds");
+        let ok = buffered_line_simple(&line, 0.075);
+        assert!(is_simple(&ok));
+        let a = area(&ok);
+        // Union of the three overlapping strips: 10 m × (0.1 + 0.15) m, far below a hull
+        // of the bent ring would be for a longer fold, and above one strip alone.
+        assert!(a > 1.5 && a < 2.8, "{a}");
+        // A simple ring comes back unchanged.
+        let straight = vec![[0.0, 0.0], [5.0, 0.0]];
+        assert_eq!(
+            buffered_line_simple(&straight, 0.1),
+            buffered_line(&straight, 0.1)
+        );
     }
 }

@@ -28,6 +28,10 @@
 //!    component's pixels — the per-object refinement of Pan et al. (2019, per-object Otsu)
 //!    in a form that stays stable for very worn paint. It trims the asphalt points that
 //!    IDW blurring put inside the outline.
+//! 5. *Flatness* ([`clear_unflat`]): paint lies flat on the road. Marking points in a cell
+//!    (`flat_cell_m`) whose pavement points spread in height more than
+//!    max(`flat_min_spread_m`, `flat_noise_factor` × the median spread of the marked cells)
+//!    are cleared: the bright foot of a barrier or curb face, wheels, bumpers.
 //!
 //! `method: "none"` skips 1–3 and keeps every pavement point (for inputs that were
 //! thresholded upstream).
@@ -35,7 +39,8 @@
 //! **Parameters** ([`Params`]): `window_radius_px` s = 12, `factor` t = 1.27 (Yao 2019
 //! best (s, t) ≈ (10–12, 1.27–1.29)), `gaussian_sigma_px` 1.0, `min_contrast` 1.25,
 //! `min_component_area_m2` 0.03, `blob_max_length_m` 1.2, `blob_max_elongation` 2.0,
-//! `blob_min_fill` 0.7, `point_contrast_fraction` 0.3.
+//! `blob_min_fill` 0.7, `point_contrast_fraction` 0.3, `flat_cell_m` 0.2,
+//! `flat_noise_factor` 4 (0 = off), `flat_min_spread_m` 0.06.
 //!
 //! **Reference.** Bradley D., Roth G. (2007) Adaptive thresholding using the integral image,
 //! J. Graphics Tools 12(2); Yao et al. (2019, 2021); Pan et al. (2019) ISPRS J.
@@ -93,6 +98,13 @@ pub struct Params {
     pub blob_min_fill: f64,
     /// Per-point check: a point needs ≥ 1 + fraction · (component level − 1).
     pub point_contrast_fraction: f64,
+    /// Flatness check: cells of this size (m) in the trajectory frame …
+    pub flat_cell_m: f64,
+    /// … whose pavement points spread in height by more than
+    /// max(`flat_min_spread_m`, `flat_noise_factor` × the median spread of the cells holding
+    /// marking points) hold no paint (0 turns the check off).
+    pub flat_noise_factor: f64,
+    pub flat_min_spread_m: f64,
 }
 
 impl Default for Params {
@@ -114,6 +126,9 @@ impl Default for Params {
             blob_max_elongation: 2.0,
             blob_min_fill: 0.7,
             point_contrast_fraction: 0.3,
+            flat_cell_m: 0.2,
+            flat_noise_factor: 4.0,
+            flat_min_spread_m: 0.06,
         }
     }
 }
@@ -156,6 +171,9 @@ impl Params {
         check_range("blob_max_elongation", self.blob_max_elongation, 1.0, 100.0)?;
         check_range("blob_min_fill", self.blob_min_fill, 0.0, 2.0)?;
         check_range("point_contrast_fraction", self.point_contrast_fraction, 0.0, 1.0)?;
+        check_range("flat_cell_m", self.flat_cell_m, 0.02, 2.0)?;
+        check_range("flat_noise_factor", self.flat_noise_factor, 0.0, 100.0)?;
+        check_range("flat_min_spread_m", self.flat_min_spread_m, 0.0, 10.0)?;
         Ok(())
     }
 
@@ -623,6 +641,81 @@ pub fn points_from_mask(seg: &Segmentation, xs: &[f64], ys: &[f64], values: &[f3
         .collect()
 }
 
+/// Flatness check (step 5 of the module docs): paint lies flat on the road, so marking
+/// points in a cell whose pavement points spread in height like a vertical face (the
+/// bright foot of a barrier or curb, a wheel, a bumper kept by the road buffer) are
+/// cleared. The allowed spread adapts to the scanner's noise: `flat_noise_factor` × the
+/// median spread of the cells that hold marking points (mostly real paint), never below
+/// `flat_min_spread_m`. Inputs are the pavement points' mileage, offset and height and the
+/// marking decision to refine; returns how many points were cleared.
+///
+/// Hand-written: a dense min/max grid over the chunk's bounding box, O(points + cells).
+pub fn clear_unflat(m: &[f64], o: &[f64], z: &[f64], is_mark: &mut [bool], p: &Params) -> usize {
+    if p.flat_noise_factor <= 0.0 || m.is_empty() || !is_mark.iter().any(|&b| b) {
+        return 0;
+    }
+    let bound = |v: &[f64]| {
+        v.iter()
+            .filter(|x| x.is_finite())
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+                (a.min(x), b.max(x))
+            })
+    };
+    let ((m0, m1), (o0, o1)) = (bound(m), bound(o));
+    if !(m0.is_finite() && o0.is_finite()) {
+        return 0;
+    }
+    // Grow the cell if the box is huge, so the grid stays small (≤ 32 M cells).
+    let mut cell = p.flat_cell_m;
+    while ((m1 - m0) / cell + 1.0) * ((o1 - o0) / cell + 1.0) > 3.2e7 {
+        cell *= 2.0;
+    }
+    let nc = ((m1 - m0) / cell) as usize + 1;
+    let nr = ((o1 - o0) / cell) as usize + 1;
+    let idx = |i: usize| -> Option<usize> {
+        if !(m[i].is_finite() && o[i].is_finite() && z[i].is_finite()) {
+            return None;
+        }
+        let c = (((m[i] - m0) / cell) as usize).min(nc - 1);
+        let r = (((o[i] - o0) / cell) as usize).min(nr - 1);
+        Some(r * nc + c)
+    };
+    let mut lo = vec![f32::INFINITY; nc * nr];
+    let mut hi = vec![f32::NEG_INFINITY; nc * nr];
+    let mut count = vec![0u32; nc * nr];
+    for i in 0..m.len() {
+        if let Some(k) = idx(i) {
+            let v = z[i] as f32;
+            lo[k] = lo[k].min(v);
+            hi[k] = hi[k].max(v);
+            count[k] += 1;
+        }
+    }
+    let spread = |k: usize| if count[k] >= 3 { hi[k] - lo[k] } else { 0.0 };
+    let mut mark_cells: Vec<usize> = (0..m.len()).filter(|&i| is_mark[i]).filter_map(idx).collect();
+    mark_cells.sort_unstable();
+    mark_cells.dedup();
+    let mut spreads: Vec<f32> = mark_cells
+        .iter()
+        .filter(|&&k| count[k] >= 3)
+        .map(|&k| spread(k))
+        .collect();
+    if spreads.is_empty() {
+        return 0;
+    }
+    let mid = spreads.len() / 2;
+    let median = *spreads.select_nth_unstable_by(mid, f32::total_cmp).1 as f64;
+    let tol = (p.flat_noise_factor * median).max(p.flat_min_spread_m) as f32;
+    let mut cleared = 0;
+    for i in 0..m.len() {
+        if is_mark[i] && idx(i).is_some_and(|k| spread(k) > tol) {
+            is_mark[i] = false;
+            cleared += 1;
+        }
+    }
+    cleared
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -869,5 +962,50 @@ mod tests {
         let vals = [3.1, 1.1, 3.0];
         let got = points_from_mask(&seg, &xs, &ys, &vals, &Params::default());
         assert_eq!(got, vec![true, false, false]);
+    }
+
+    #[test]
+    fn marks_on_a_vertical_face_are_cleared_and_flat_paint_kept() {
+        // A flat road with 2 mm noise and a 1 m line of paint at offset 0; at offset 3 a
+        // barrier face: bright points from road level to 0.25 m up.
+        let (mut m, mut o, mut z, mut mark) = (vec![], vec![], vec![], vec![]);
+        let mut k = 0u32;
+        let mut noise = || {
+            k = k.wrapping_mul(1_103_515_245).wrapping_add(12_345);
+            (k >> 16) as f64 / 65_536.0 * 0.004 - 0.002
+        };
+        for i in 0..200 {
+            for j in -40..80 {
+                let (mi, oj) = (i as f64 * 0.01, j as f64 * 0.05);
+                m.push(mi);
+                o.push(oj);
+                z.push(noise());
+                mark.push(oj.abs() < 0.08);
+            }
+            for h in 0..6 {
+                m.push(i as f64 * 0.01);
+                o.push(3.0);
+                z.push(h as f64 * 0.05);
+                mark.push(true);
+            }
+        }
+        let before = mark.clone();
+        let cleared = clear_unflat(&m, &o, &z, &mut mark, &Params::default());
+        assert_eq!(cleared, 200 * 6, "every point of the face");
+        for i in 0..m.len() {
+            if (o[i] - 3.0).abs() < 0.1 {
+                assert!(!mark[i]);
+            } else if o[i].abs() < 0.08 {
+                assert_eq!(mark[i], before[i], "paint on the flat road stays");
+            }
+        }
+        // Turned off: nothing changes.
+        let mut again = before.clone();
+        let off = Params {
+            flat_noise_factor: 0.0,
+            ..Params::default()
+        };
+        assert_eq!(clear_unflat(&m, &o, &z, &mut again, &off), 0);
+        assert_eq!(again, before);
     }
 }

@@ -46,6 +46,10 @@ pub struct Params {
     pub curved_min_sagitta_m: f64,
     /// Douglas–Peucker tolerance for curved and alpha-shape outlines (m). Default 0.01.
     pub outline_simplify_m: f64,
+    /// Bar-like classes (lines, stripes, stop lines) wider than this (m) are outlined by
+    /// their alpha shape, not their rectangle: no painted bar is that wide, so the cluster
+    /// holds more than one mark. Default 0.8.
+    pub max_bar_width_m: f64,
     /// Lane-line growth.
     pub lane_lines: lanes::Params,
 }
@@ -55,6 +59,7 @@ impl Default for Params {
         Self {
             curved_min_sagitta_m: 0.03,
             outline_simplify_m: 0.01,
+            max_bar_width_m: 0.8,
             lane_lines: lanes::Params::default(),
         }
     }
@@ -73,6 +78,12 @@ impl Params {
             return Err(format!(
                 "outline_simplify_m must be in [0, 0.5], got {}",
                 self.outline_simplify_m
+            ));
+        }
+        if !(self.max_bar_width_m >= 0.1 && self.max_bar_width_m <= 20.0) {
+            return Err(format!(
+                "max_bar_width_m must be in [0.1, 20], got {}",
+                self.max_bar_width_m
             ));
         }
         self.lane_lines.validate()
@@ -121,7 +132,7 @@ pub fn outlines(cloud: &PointCloud, candidates: &[Candidate], params: &Params) -
                     let cl: Vec<[f64; 2]> = l.centerline.iter().map(|&p| abs(p)).collect();
                     if c.class == MarkingClass::SolidLine || l.sagitta_m > params.curved_min_sagitta_m {
                         let simple = geom::simplify(&l.centerline, params.outline_simplify_m / 2.0);
-                        let ring = outline::buffered_line(&simple, l.width_m / 2.0);
+                        let ring = outline::buffered_line_simple(&simple, l.width_m / 2.0);
                         (ring, l.length_m, l.width_m, heading_deg(chord), Some(cl))
                     } else {
                         (
@@ -132,6 +143,25 @@ pub fn outlines(cloud: &PointCloud, candidates: &[Candidate], params: &Params) -
                             Some(cl),
                         )
                     }
+                }
+                // A "bar" wider than any painted bar is a merged cluster (a gore area, a
+                // line touching stripes): its rectangle would cover bare asphalt, so it is
+                // outlined like an irregular mark below.
+                MarkingClass::StopLine
+                | MarkingClass::Crosswalk
+                | MarkingClass::Guideline
+                | MarkingClass::DashedLine
+                | MarkingClass::SolidLine
+                    if s.width_m > params.max_bar_width_m =>
+                {
+                    let pts: Vec<[f64; 2]> = c.indices.iter().map(|&i| [cloud.x[i], cloud.y[i]]).collect();
+                    (
+                        irregular_ring(&pts, s, params),
+                        s.length_m,
+                        s.width_m,
+                        heading_deg(along),
+                        None,
+                    )
                 }
                 MarkingClass::StopLine => {
                     let right = [drive[1], -drive[0]];
@@ -154,20 +184,13 @@ pub fn outlines(cloud: &PointCloud, candidates: &[Candidate], params: &Params) -
                 ),
                 _ => {
                     let pts: Vec<[f64; 2]> = c.indices.iter().map(|&i| [cloud.x[i], cloud.y[i]]).collect();
-                    let mut ring = outline::irregular(&pts, s.spacing_m);
-                    if ring.len() >= 4 {
-                        let mut closed = ring.clone();
-                        closed.push(ring[0]);
-                        let mut simple = geom::simplify(&closed, params.outline_simplify_m);
-                        simple.pop();
-                        if simple.len() >= 3 {
-                            ring = simple;
-                        }
-                    }
-                    if ring.len() < 3 {
-                        ring = s.corners().to_vec();
-                    }
-                    (ring, s.length_m, s.width_m, heading_deg(along), None)
+                    (
+                        irregular_ring(&pts, s, params),
+                        s.length_m,
+                        s.width_m,
+                        heading_deg(along),
+                        None,
+                    )
                 }
             };
             // A self-intersecting ring (a buffered centreline folding on a tight bend, an
@@ -203,6 +226,24 @@ pub fn outlines(cloud: &PointCloud, candidates: &[Candidate], params: &Params) -
             })
         })
         .collect()
+}
+
+/// Alpha-shape outline of an irregular mark, simplified; the rectangle when degenerate.
+fn irregular_ring(pts: &[[f64; 2]], s: &super::classify::Shape, params: &Params) -> Vec<[f64; 2]> {
+    let mut ring = outline::irregular(pts, s.spacing_m);
+    if ring.len() >= 4 {
+        let mut closed = ring.clone();
+        closed.push(ring[0]);
+        let mut simple = geom::simplify(&closed, params.outline_simplify_m);
+        simple.pop();
+        if simple.len() >= 3 {
+            ring = simple;
+        }
+    }
+    if ring.len() < 3 {
+        ring = s.corners().to_vec();
+    }
+    ring
 }
 
 /// Smallest outline area kept (m²): far below any real marking (a 0.1 m x 0.01 m sliver).
