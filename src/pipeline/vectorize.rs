@@ -33,7 +33,7 @@ use super::geom;
 use super::lanes::{self, LanePiece};
 use super::outline;
 use super::refline::RefLine;
-use super::types::{LaneLine, Marking, MarkingClass, PointCloud, Trajectory};
+use super::types::{LaneLine, LaneLineClass, Marking, MarkingClass, PointCloud, Trajectory};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -50,6 +50,10 @@ pub struct Params {
     /// their alpha shape, not their rectangle: no painted bar is that wide, so the cluster
     /// holds more than one mark. Default 0.8.
     pub max_bar_width_m: f64,
+    /// Gaps (m) up to this long between consecutive solid pieces of a solid lane line are
+    /// bridged by an inferred solid piece (confidence halved, no points); 0 turns it off.
+    /// Default 4.
+    pub bridge_solid_gap_m: f64,
     /// Lane-line growth.
     pub lane_lines: lanes::Params,
 }
@@ -60,6 +64,7 @@ impl Default for Params {
             curved_min_sagitta_m: 0.03,
             outline_simplify_m: 0.01,
             max_bar_width_m: 0.8,
+            bridge_solid_gap_m: 4.0,
             lane_lines: lanes::Params::default(),
         }
     }
@@ -84,6 +89,12 @@ impl Params {
             return Err(format!(
                 "max_bar_width_m must be in [0.1, 20], got {}",
                 self.max_bar_width_m
+            ));
+        }
+        if !(self.bridge_solid_gap_m >= 0.0 && self.bridge_solid_gap_m <= 50.0) {
+            return Err(format!(
+                "bridge_solid_gap_m must be in [0, 50], got {}",
+                self.bridge_solid_gap_m
             ));
         }
         self.lane_lines.validate()
@@ -246,6 +257,84 @@ fn irregular_ring(pts: &[[f64; 2]], s: &super::classify::Shape, params: &Params)
     ring
 }
 
+/// A solid piece filling the gap between solid pieces `a` and `b` of one lane line, along
+/// the lane line's polyline, when the gap is longer than a pixel-scale joint (0.1 m) and at
+/// most `max_gap` (m). Its confidence is half the weaker neighbour's, its point count 0
+/// (no paint was seen there).
+fn bridge(a: &Piece, b: &Piece, lane: &[[f64; 2]], max_gap: f64) -> Option<Piece> {
+    let (ca, cb) = (a.centerline.as_ref()?, b.centerline.as_ref()?);
+    let d = |p: [f64; 2], q: [f64; 2]| (p[0] - q[0]).hypot(p[1] - q[1]);
+    // Closest pair of ends (centrelines may run either way).
+    let ends = |c: &Vec<[f64; 2]>| [c[0], c[c.len() - 1]];
+    let (mut pa, mut pb, mut gap) = ([0.0; 2], [0.0; 2], f64::INFINITY);
+    for p in ends(ca) {
+        for q in ends(cb) {
+            if d(p, q) < gap {
+                (pa, pb, gap) = (p, q, d(p, q));
+            }
+        }
+    }
+    if !(gap > 0.1 && gap <= max_gap) || lane.len() < 2 {
+        return None;
+    }
+    // The lane-line vertices between the two ends (by station along the lane line).
+    let station = |p: [f64; 2]| {
+        let mut best = (f64::INFINITY, 0.0);
+        let mut s0 = 0.0;
+        for seg in lane.windows(2) {
+            let (u, v) = (seg[0], seg[1]);
+            let len = d(u, v);
+            let t = if len > 0.0 {
+                (((p[0] - u[0]) * (v[0] - u[0]) + (p[1] - u[1]) * (v[1] - u[1])) / (len * len))
+                    .clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let q = [u[0] + t * (v[0] - u[0]), u[1] + t * (v[1] - u[1])];
+            if d(p, q) < best.0 {
+                best = (d(p, q), s0 + t * len);
+            }
+            s0 += len;
+        }
+        best.1
+    };
+    let (sa, sb) = (station(pa), station(pb));
+    let (lo, hi) = (sa.min(sb), sa.max(sb));
+    let mut line = vec![if sa <= sb { pa } else { pb }];
+    let mut s0 = 0.0;
+    for (i, v) in lane.iter().enumerate() {
+        if i > 0 {
+            s0 += d(lane[i - 1], *v);
+        }
+        if s0 > lo + 0.01 && s0 < hi - 0.01 {
+            line.push(*v);
+        }
+    }
+    line.push(if sa <= sb { pb } else { pa });
+    let width = 0.5 * (a.marking.width_m + b.marking.width_m);
+    let ring = outline::buffered_line_simple(&line, width / 2.0);
+    if ring.len() < 3 {
+        return None;
+    }
+    let chord = [
+        line[line.len() - 1][0] - line[0][0],
+        line[line.len() - 1][1] - line[0][1],
+    ];
+    Some(Piece {
+        marking: Marking {
+            id: String::new(),
+            class: MarkingClass::SolidLine,
+            outline: ring,
+            confidence: 0.5 * a.marking.confidence.min(b.marking.confidence),
+            length_m: geom::polyline_length(&line),
+            width_m: width,
+            heading_deg: heading_deg(chord),
+            point_count: 0,
+        },
+        centerline: Some(line),
+    })
+}
+
 /// Smallest outline area kept (m²): far below any real marking (a 0.1 m x 0.01 m sliver).
 const MIN_OUTLINE_AREA_M2: f64 = 1e-3;
 
@@ -274,6 +363,23 @@ pub fn assemble(pieces: Vec<Piece>, traj_abs: &Trajectory, params: &Params) -> (
     let mut pieces = pieces;
     for &(k, class) in &lanes.classes {
         pieces[k].marking.class = class;
+    }
+    // Solid lane lines: short gaps between consecutive solid pieces (worn paint, a car
+    // hiding the line) are bridged by a solid piece along the lane line.
+    if params.bridge_solid_gap_m > 0.0 {
+        let mut bridges = Vec::new();
+        for l in lanes.lines.iter().filter(|l| l.class == LaneLineClass::SolidLine) {
+            for w in l.pieces.windows(2) {
+                let (a, b) = (&pieces[w[0]], &pieces[w[1]]);
+                if a.marking.class != MarkingClass::SolidLine || b.marking.class != MarkingClass::SolidLine {
+                    continue;
+                }
+                if let Some(bridge) = bridge(a, b, &l.line, params.bridge_solid_gap_m) {
+                    bridges.push(bridge);
+                }
+            }
+        }
+        pieces.extend(bridges);
     }
     // Driving order: station of the outline's vertex mean on the absolute reference line.
     let refl = RefLine::new(traj_abs);
@@ -365,5 +471,40 @@ mod tests {
         let bad: Params = serde_json::from_str(r#"{"lane_lines": {"max_angle_deg": -1}}"#).unwrap();
         assert!(bad.validate().unwrap_err().contains("max_angle_deg"));
         assert!(serde_json::from_str::<Params>(r#"{"lanes": {}}"#).is_err());
+    }
+
+    fn solid(x0: f64, x1: f64) -> Piece {
+        Piece {
+            marking: Marking {
+                id: String::new(),
+                class: MarkingClass::SolidLine,
+                outline: outline::buffered_line(&[[x0, 0.0], [x1, 0.0]], 0.075),
+                confidence: 0.8,
+                length_m: x1 - x0,
+                width_m: 0.15,
+                heading_deg: 90.0,
+                point_count: 100,
+            },
+            centerline: Some(vec![[x0, 0.0], [x1, 0.0]]),
+        }
+    }
+
+    #[test]
+    fn short_gaps_of_a_solid_line_are_bridged_along_it_and_long_ones_not() {
+        let lane: Vec<[f64; 2]> = (0..=30).map(|i| [i as f64, 0.0]).collect();
+        let b = bridge(&solid(0.0, 10.0), &solid(13.0, 30.0), &lane, 4.0).expect("3 m gap");
+        assert_eq!(b.marking.class, MarkingClass::SolidLine);
+        assert_eq!(b.marking.point_count, 0);
+        assert!((b.marking.confidence - 0.4).abs() < 1e-12);
+        assert!((b.marking.length_m - 3.0).abs() < 1e-9);
+        assert!((outline::area(&b.marking.outline) - 3.0 * 0.15).abs() < 1e-6);
+        // Either piece order and centreline direction give the same bridge.
+        let mut rev = solid(13.0, 30.0);
+        rev.centerline.as_mut().unwrap().reverse();
+        let b2 = bridge(&rev, &solid(0.0, 10.0), &lane, 4.0).expect("3 m gap");
+        assert!((b2.marking.length_m - 3.0).abs() < 1e-9);
+        // Too long, or a mere joint: nothing.
+        assert!(bridge(&solid(0.0, 10.0), &solid(15.0, 30.0), &lane, 4.0).is_none());
+        assert!(bridge(&solid(0.0, 10.0), &solid(10.05, 30.0), &lane, 4.0).is_none());
     }
 }
