@@ -1507,7 +1507,13 @@ async fn check_end_to_end(app: &TestApp, id: &str, tiles: &[PathBuf], survey: &P
         r_native.to_text()
     );
     let f = |r: &roadmark::eval::Report| r.pixel.f_score.unwrap_or(0.0);
-    assert!(f(&r_native) > 0.0, "nothing of the truth was found");
+    // The pipeline scores ≈ 0.63 on this 80 m survey (the first metres of a drive have no
+    // scan behind them); the service must deliver that, not just something.
+    assert!(
+        f(&r_native) >= 0.5,
+        "the service's answer scores pixel F {} < 0.5",
+        f(&r_native)
+    );
     assert!(
         (f(&r_native) - f(&r_wgs84)).abs() < 0.02,
         "the CRS of the answer changes the score: {} vs {}",
