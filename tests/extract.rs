@@ -90,6 +90,85 @@ fn semantickitti_marking_points_precision_and_recall() {
     assert!(recall >= 0.32, "recall {recall:.3} below 0.32");
 }
 
+/// A stand-in trajectory for a tile that has none: a straight drive along the principal axis
+/// of the tile's ground points (the street's direction), 2 m above their median height,
+/// extended 5 m beyond the points at both ends, one pose per metre.
+fn principal_axis_trajectory(cloud: &roadmark::pipeline::types::PointCloud, out: &Path) {
+    let n = cloud.len() as f64;
+    let (mx, my) = (cloud.x.iter().sum::<f64>() / n, cloud.y.iter().sum::<f64>() / n);
+    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+    for i in 0..cloud.len() {
+        let (dx, dy) = (cloud.x[i] - mx, cloud.y[i] - my);
+        sxx += dx * dx;
+        sxy += dx * dy;
+        syy += dy * dy;
+    }
+    // Direction of the larger eigenvalue of the 2×2 covariance.
+    let angle = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+    let (ux, uy) = (angle.cos(), angle.sin());
+    let along: Vec<f64> = (0..cloud.len())
+        .map(|i| (cloud.x[i] - mx) * ux + (cloud.y[i] - my) * uy)
+        .collect();
+    let lo = along.iter().cloned().fold(f64::INFINITY, f64::min) - 5.0;
+    let hi = along.iter().cloned().fold(f64::NEG_INFINITY, f64::max) + 5.0;
+    let mut z = cloud.z.clone();
+    z.sort_by(f64::total_cmp);
+    let zc = z[z.len() / 2] + 2.0;
+    let heading = ux.atan2(uy).to_degrees().rem_euclid(360.0);
+    let o = cloud.origin;
+    let mut csv = String::from("time,x,y,z,heading\n");
+    let steps = (hi - lo).ceil() as usize;
+    for k in 0..=steps {
+        let t = lo + k as f64;
+        csv += &format!(
+            "{:.2},{:.3},{:.3},{:.3},{:.2}\n",
+            k as f64 * 0.1,
+            o[0] + mx + t * ux,
+            o[1] + my + t * uy,
+            o[2] + zc,
+            heading
+        );
+    }
+    std::fs::write(out, csv).unwrap();
+}
+
+/// Amsterdam tiles (real dense MLS of narrow streets without lane lines, LAZ, EPSG:28992,
+/// quantised intensity): the pipeline must not invent lane lines there. The tiles come
+/// without a trajectory; the street's principal axis stands in for it.
+#[test]
+fn amsterdam_tiles_get_no_invented_lane_lines() {
+    let dir = shared().join("data/real/amsterdam_cyclomedia");
+    let tmp = tempfile::tempdir().expect("tempdir");
+    for tile in ["2292_9700", "2293_9698", "2294_9700", "2294_9701"] {
+        let laz = dir.join(format!("{tile}.laz"));
+        let cloud = io::read_points(&[laz.as_path()]).unwrap();
+        assert!(
+            cloud.len() > 10_000,
+            "tile {tile} read whole: {} points",
+            cloud.len()
+        );
+        let trajectory = tmp.path().join(format!("{tile}.csv"));
+        principal_axis_trajectory(&cloud, &trajectory);
+        let inputs = Inputs {
+            points: vec![laz],
+            trajectory,
+        };
+        let (extraction, _) =
+            driver::run_collecting_marking_points(&inputs, &defaults(), &NoProgress).unwrap();
+        eprintln!(
+            "amsterdam {tile}: {} points, {} markings, {} lane lines",
+            cloud.len(),
+            extraction.markings.len(),
+            extraction.lane_lines.len()
+        );
+        assert!(
+            extraction.lane_lines.is_empty(),
+            "tile {tile}: {} lane lines invented on a street without any",
+            extraction.lane_lines.len()
+        );
+    }
+}
+
 /// Pixel F (and per-point precision/recall against `labels.bin`) of a short simulated scene
 /// run through the whole pipeline and scored by the evaluator.
 fn sim_scores(scene: &str, length_m: f64) -> (f64, f64, f64) {
