@@ -2,6 +2,9 @@
 //! points against label 60), the `extract` command's error handling, and simulated scenes
 //! scored by `evaluate` against the contract's targets.
 
+// Columns (x, y, z, labels) are walked in step by index: clearer than zipped iterators.
+#![allow(clippy::needless_range_loop)]
+
 use roadmark::pipeline::driver;
 use roadmark::pipeline::params::{Params, ValidParams};
 use roadmark::pipeline::{Inputs, NoProgress, io};

@@ -11,6 +11,7 @@ pub mod chunk;
 pub mod classify;
 /// Stage 4: Euclidean clustering of marking points.
 pub mod cluster;
+pub mod dashes;
 /// The driver behind [`run`]: chunk loop, streaming clusters, statistics.
 pub mod driver;
 /// Errors of the pipeline, split into fatal input errors and retryable ones.

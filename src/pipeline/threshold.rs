@@ -683,9 +683,9 @@ pub fn clear_unflat(m: &[f64], o: &[f64], z: &[f64], is_mark: &mut [bool], p: &P
     let mut lo = vec![f32::INFINITY; nc * nr];
     let mut hi = vec![f32::NEG_INFINITY; nc * nr];
     let mut count = vec![0u32; nc * nr];
-    for i in 0..m.len() {
+    for (i, &zi) in z.iter().enumerate().take(m.len()) {
         if let Some(k) = idx(i) {
-            let v = z[i] as f32;
+            let v = zi as f32;
             lo[k] = lo[k].min(v);
             hi[k] = hi[k].max(v);
             count[k] += 1;
@@ -707,9 +707,9 @@ pub fn clear_unflat(m: &[f64], o: &[f64], z: &[f64], is_mark: &mut [bool], p: &P
     let median = *spreads.select_nth_unstable_by(mid, f32::total_cmp).1 as f64;
     let tol = (p.flat_noise_factor * median).max(p.flat_min_spread_m) as f32;
     let mut cleared = 0;
-    for i in 0..m.len() {
-        if is_mark[i] && idx(i).is_some_and(|k| spread(k) > tol) {
-            is_mark[i] = false;
+    for (i, mark) in is_mark.iter_mut().enumerate().take(m.len()) {
+        if *mark && idx(i).is_some_and(|k| spread(k) > tol) {
+            *mark = false;
             cleared += 1;
         }
     }

@@ -29,6 +29,7 @@
 //! O(n log n) for the alpha shapes of n points; see `lanes` for the growth.
 
 use super::classify::Candidate;
+use super::dashes;
 use super::geom;
 use super::lanes::{self, LanePiece};
 use super::outline;
@@ -54,6 +55,13 @@ pub struct Params {
     /// bridged by an inferred solid piece (confidence halved, no points); 0 turns it off.
     /// Default 4.
     pub bridge_solid_gap_m: f64,
+    /// Dashes of a regular dashed lane line seen only in part (worn, shadowed, sparse far
+    /// scan lines) get the painted extent of the line's design: its dash length, period and
+    /// width, estimated from its complete dashes (see `dashes`). Default true.
+    pub regularize_dashes: bool,
+    /// With `regularize_dashes`: at most this many consecutive missing dashes of a regular
+    /// run are added (confidence halved, no points); 0 adds none. Default 1.
+    pub fill_missing_dashes: u32,
     /// Lane-line growth.
     pub lane_lines: lanes::Params,
 }
@@ -65,6 +73,8 @@ impl Default for Params {
             outline_simplify_m: 0.01,
             max_bar_width_m: 0.8,
             bridge_solid_gap_m: 4.0,
+            regularize_dashes: true,
+            fill_missing_dashes: 1,
             lane_lines: lanes::Params::default(),
         }
     }
@@ -95,6 +105,12 @@ impl Params {
             return Err(format!(
                 "bridge_solid_gap_m must be in [0, 50], got {}",
                 self.bridge_solid_gap_m
+            ));
+        }
+        if self.fill_missing_dashes > 10 {
+            return Err(format!(
+                "fill_missing_dashes must be in [0, 10], got {}",
+                self.fill_missing_dashes
             ));
         }
         self.lane_lines.validate()
@@ -278,27 +294,7 @@ fn bridge(a: &Piece, b: &Piece, lane: &[[f64; 2]], max_gap: f64) -> Option<Piece
         return None;
     }
     // The lane-line vertices between the two ends (by station along the lane line).
-    let station = |p: [f64; 2]| {
-        let mut best = (f64::INFINITY, 0.0);
-        let mut s0 = 0.0;
-        for seg in lane.windows(2) {
-            let (u, v) = (seg[0], seg[1]);
-            let len = d(u, v);
-            let t = if len > 0.0 {
-                (((p[0] - u[0]) * (v[0] - u[0]) + (p[1] - u[1]) * (v[1] - u[1])) / (len * len))
-                    .clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-            let q = [u[0] + t * (v[0] - u[0]), u[1] + t * (v[1] - u[1])];
-            if d(p, q) < best.0 {
-                best = (d(p, q), s0 + t * len);
-            }
-            s0 += len;
-        }
-        best.1
-    };
-    let (sa, sb) = (station(pa), station(pb));
+    let (sa, sb) = (station_on(lane, pa), station_on(lane, pb));
     let (lo, hi) = (sa.min(sb), sa.max(sb));
     let mut line = vec![if sa <= sb { pa } else { pb }];
     let mut s0 = 0.0;
@@ -333,6 +329,135 @@ fn bridge(a: &Piece, b: &Piece, lane: &[[f64; 2]], max_gap: f64) -> Option<Piece
         },
         centerline: Some(line),
     })
+}
+
+/// Station (distance along `lane` from its first vertex) of the point of `lane` nearest `p`.
+fn station_on(lane: &[[f64; 2]], p: [f64; 2]) -> f64 {
+    let d = |p: [f64; 2], q: [f64; 2]| (p[0] - q[0]).hypot(p[1] - q[1]);
+    let mut best = (f64::INFINITY, 0.0);
+    let mut s0 = 0.0;
+    for seg in lane.windows(2) {
+        let (u, v) = (seg[0], seg[1]);
+        let len = d(u, v);
+        let t = if len > 0.0 {
+            (((p[0] - u[0]) * (v[0] - u[0]) + (p[1] - u[1]) * (v[1] - u[1])) / (len * len)).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let q = [u[0] + t * (v[0] - u[0]), u[1] + t * (v[1] - u[1])];
+        if d(p, q) < best.0 {
+            best = (d(p, q), s0 + t * len);
+        }
+        s0 += len;
+    }
+    best.1
+}
+
+/// The part of `lane` between stations `a < b` (clamped to the line): the point at `a`, the
+/// vertices in between, the point at `b`.
+fn sub_line(lane: &[[f64; 2]], a: f64, b: f64) -> Vec<[f64; 2]> {
+    let d = |p: [f64; 2], q: [f64; 2]| (p[0] - q[0]).hypot(p[1] - q[1]);
+    let at = |seg: &[[f64; 2]], t: f64| {
+        [
+            seg[0][0] + t * (seg[1][0] - seg[0][0]),
+            seg[0][1] + t * (seg[1][1] - seg[0][1]),
+        ]
+    };
+    let mut out = Vec::new();
+    let mut s0 = 0.0;
+    for seg in lane.windows(2) {
+        let len = d(seg[0], seg[1]);
+        let s1 = s0 + len;
+        if len > 0.0 && s1 > a && s0 < b {
+            if out.is_empty() {
+                out.push(at(seg, ((a - s0) / len).clamp(0.0, 1.0)));
+            }
+            if s1 < b {
+                out.push(seg[1]);
+            } else {
+                out.push(at(seg, ((b - s0) / len).clamp(0.0, 1.0)));
+            }
+        }
+        s0 = s1;
+    }
+    out
+}
+
+/// Dashes of the dashed lane lines put on their line's design (see [`super::dashes`]):
+/// short dashes that fit the pattern get their painted extent, and up to
+/// `fill_missing_dashes` missing dashes in a row are added (confidence halved, no points).
+/// Returns the added pieces.
+fn regularise_dashes(pieces: &mut [Piece], lines: &[lanes::LaneResult], params: &Params) -> Vec<Piece> {
+    let mut added = Vec::new();
+    for l in lines
+        .iter()
+        .filter(|l| l.class == LaneLineClass::DashedLine && l.line.len() >= 2)
+    {
+        let total = geom::polyline_length(&l.line);
+        let spans: Vec<dashes::Span> = l
+            .pieces
+            .iter()
+            .filter(|&&k| pieces[k].marking.class == MarkingClass::DashedLine)
+            .filter_map(|&k| {
+                let cl = pieces[k].centerline.as_ref()?;
+                let st: Vec<f64> = cl.iter().map(|&q| station_on(&l.line, q)).collect();
+                let a = st.iter().copied().fold(f64::INFINITY, f64::min);
+                let b = st.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                Some(dashes::Span {
+                    key: k,
+                    a,
+                    b,
+                    width: pieces[k].marking.width_m,
+                    confidence: pieces[k].marking.confidence,
+                })
+            })
+            .collect();
+        let plan = dashes::plan(&spans, params.fill_missing_dashes as usize);
+        // (centreline, outline) of a dash from station a to b.
+        type Drawn = (Vec<[f64; 2]>, Vec<[f64; 2]>);
+        let make = |a: f64, b: f64, width: f64| -> Option<Drawn> {
+            // Only where the lane line runs: a dash reaching past its ends is not placed.
+            if a < -0.05 || b > total + 0.05 {
+                return None;
+            }
+            let line = sub_line(&l.line, a.max(0.0), b.min(total));
+            let ring = outline::buffered_line_simple(&line, width / 2.0);
+            (line.len() >= 2 && ring.len() >= 3).then_some((line, ring))
+        };
+        for &(k, a, b, width) in &plan.extend {
+            let Some((line, ring)) = make(a, b, width) else {
+                continue;
+            };
+            let m = &mut pieces[k].marking;
+            m.outline = ring;
+            m.length_m = geom::polyline_length(&line);
+            m.width_m = width;
+            pieces[k].centerline = Some(line);
+        }
+        for &(a, b, width, confidence) in &plan.fill {
+            let Some((line, ring)) = make(a, b, width) else {
+                continue;
+            };
+            let chord = [
+                line[line.len() - 1][0] - line[0][0],
+                line[line.len() - 1][1] - line[0][1],
+            ];
+            added.push(Piece {
+                marking: Marking {
+                    id: String::new(),
+                    class: MarkingClass::DashedLine,
+                    outline: ring,
+                    confidence,
+                    length_m: geom::polyline_length(&line),
+                    width_m: width,
+                    heading_deg: heading_deg(chord),
+                    point_count: 0,
+                },
+                centerline: Some(line),
+            });
+        }
+    }
+    added
 }
 
 /// Smallest outline area kept (m²): far below any real marking (a 0.1 m x 0.01 m sliver).
@@ -380,6 +505,10 @@ pub fn assemble(pieces: Vec<Piece>, traj_abs: &Trajectory, params: &Params) -> (
             }
         }
         pieces.extend(bridges);
+    }
+    if params.regularize_dashes {
+        let added = regularise_dashes(&mut pieces, &lanes.lines, params);
+        pieces.extend(added);
     }
     // Driving order: station of the outline's vertex mean on the absolute reference line.
     let refl = RefLine::new(traj_abs);
@@ -453,6 +582,21 @@ pub fn run(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Stations and sub-lines along a bent lane line (10 m east, then 10 m north).
+    #[test]
+    fn stations_and_sub_lines_follow_the_lane_line() {
+        let lane = [[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]];
+        assert!((station_on(&lane, [4.0, 0.3]) - 4.0).abs() < 1e-9);
+        assert!((station_on(&lane, [10.2, 6.0]) - 16.0).abs() < 1e-9);
+        let sub = sub_line(&lane, 8.0, 13.0);
+        assert_eq!(sub.len(), 3, "{sub:?}");
+        let near = |p: [f64; 2], q: [f64; 2]| (p[0] - q[0]).hypot(p[1] - q[1]) < 1e-9;
+        assert!(near(sub[0], [8.0, 0.0]) && near(sub[1], [10.0, 0.0]) && near(sub[2], [10.0, 3.0]));
+        assert!((geom::polyline_length(&sub) - 5.0).abs() < 1e-9);
+        let inner = sub_line(&lane, 2.0, 3.5);
+        assert!(inner.len() == 2 && near(inner[0], [2.0, 0.0]) && near(inner[1], [3.5, 0.0]));
+    }
 
     #[test]
     fn headings_are_clockwise_from_north() {
