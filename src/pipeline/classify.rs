@@ -14,8 +14,11 @@
 //!    angle to the trajectory) and, in the (mileage, offset) frame of the smoothed
 //!    trajectory, a centreline test: per 0.5 m mileage slice the median offset; the piece is
 //!    a *line* when the residuals about that centreline are as narrow as one painted line
-//!    (≤ `line_max_width_m`) and it runs within `line_max_angle_deg` of the trajectory. The
-//!    line test works on curved pieces, where an MBR is a fat wrong rectangle.
+//!    (≤ `line_max_width_m`), as wide along its whole length (fewer than a tenth of its
+//!    slices wider than `line_max_width_ratio` × the median slice width, so a straight
+//!    arrow's shaft and head is no line) and it runs within `line_max_angle_deg` of the
+//!    trajectory.
+//!    The line test works on curved pieces, where an MBR is a fat wrong rectangle.
 //! 2. Broken lines are re-joined (Pan 2019): line pieces and short narrow fragments whose
 //!    ends are ≤ `join_gap_m` apart along the trajectory, at the same offset (prediction
 //!    from the piece's slope) and of similar width are merged (mutual best match), so a
@@ -72,6 +75,12 @@ pub struct Params {
     /// Widest single painted line (m). Default 0.55 (lane lines are 0.10–0.25 m; GB
     /// acceleration-lane dashes and wide edge lines are 0.45 m).
     pub line_max_width_m: f64,
+    /// Filled cross-sections of a line piece wider than this many times its typical one
+    /// (the median over its slices) — and more than [`LINE_WIDTH_SLACK_M`] wider — are wide;
+    /// a piece with at least [`WIDE_SLICE_SHARE`] of them is no line: a painted line has
+    /// one width along its length, a straight arrow (0.15–0.25 m shaft, 0.75 m head) does
+    /// not (its head's 0.5 m slices measure 0.5–0.65 m). Default 1.6.
+    pub line_max_width_ratio: f64,
     /// Largest angle between a line piece and the trajectory (deg). Default 20.
     pub line_max_angle_deg: f64,
     /// Solid-line piece: at least this long (m). Default 7 (Yao 2019: a > 7 m).
@@ -100,6 +109,7 @@ impl Default for Params {
             min_area_m2: 0.02,
             blob_max_size_m: 1.0,
             line_max_width_m: 0.55,
+            line_max_width_ratio: 1.6,
             line_max_angle_deg: 20.0,
             solid_min_length_m: 7.0,
             solid_min_ratio: 20.0,
@@ -121,6 +131,7 @@ impl Params {
             ("min_area_m2", self.min_area_m2, 0.0, 10.0),
             ("blob_max_size_m", self.blob_max_size_m, 0.0, 5.0),
             ("line_max_width_m", self.line_max_width_m, 0.01, 2.0),
+            ("line_max_width_ratio", self.line_max_width_ratio, 1.0, 100.0),
             ("line_max_angle_deg", self.line_max_angle_deg, 0.0, 60.0),
             ("solid_min_length_m", self.solid_min_length_m, 0.1, 100.0),
             ("solid_min_ratio", self.solid_min_ratio, 1.0, 1000.0),
@@ -152,6 +163,15 @@ impl Params {
         Ok(())
     }
 }
+
+/// Width differences a line piece may show between its cross-sections whatever
+/// `line_max_width_ratio` says (m): sparse far lines, a few points per slice, measure
+/// narrow slices.
+pub const LINE_WIDTH_SLACK_M: f64 = 0.15;
+
+/// Share of a line piece's cross-sections that may be wider than its typical one (see
+/// `line_max_width_ratio`) before the piece is no line.
+pub const WIDE_SLICE_SHARE: f64 = 0.1;
 
 /// Robust rectangle and shape features of a cluster (local coordinates).
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -366,6 +386,37 @@ fn line_geometry(pts: &[[f64; 2]], refl: &RefLine, p: &Params) -> Option<LineGeo
     let width = (r1 - r0) * cosang;
     if width > p.line_max_width_m || ext * cosang < 3.0 * width.max(0.05) {
         return None;
+    }
+    // A painted line has one width along its length; an arrow (narrow shaft, wide head)
+    // whose overall width stays under `line_max_width_m` does not. Slices with few points
+    // (sparse far lines) measure no width.
+    // (width, filled) per slice: filled when no gap across it is over a quarter of its
+    // width — an arrow head is filled, a double line whose one line is worn in places is
+    // not.
+    let mut slice_w: Vec<(f64, bool)> = Vec::new();
+    for k in 0..ns {
+        let n = slices[k].len();
+        if n >= 6 {
+            let f = geom::interp_clamped(&ks, &fo, slice_s[k] / n as f64);
+            let mut r: Vec<f64> = slices[k].iter().map(|o| o - f).collect();
+            r.sort_unstable_by(f64::total_cmp);
+            let (a, b) = geom::robust_extent(&r);
+            let gap = r.windows(2).map(|w| w[1] - w[0]).fold(0.0, f64::max);
+            slice_w.push(((b - a) * cosang, gap <= 0.25 * (b - a)));
+        }
+    }
+    if slice_w.len() >= 4 {
+        let typical = geom::median(&mut slice_w.iter().map(|w| w.0).collect::<Vec<f64>>());
+        let wide_from = (p.line_max_width_ratio * typical).max(typical + LINE_WIDTH_SLACK_M);
+        let wide = slice_w
+            .iter()
+            .filter(|&&(w, filled)| filled && w > wide_from)
+            .count();
+        // A few wide slices are something touching the line's end (a stop line, a
+        // crosswalk stripe); a tenth of its length is a part of its own shape.
+        if width > wide_from && wide >= 2 && wide as f64 >= WIDE_SLICE_SHARE * slice_w.len() as f64 {
+            return None;
+        }
     }
     let angle = slope.abs().atan().to_degrees();
     // Local angles too: a piece bending across the road is not a lane line.
@@ -857,5 +908,67 @@ fn confirm_groups(items: &mut [(Candidate, Option<DropReason>)]) {
                 c.confidence = 0.4;
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipeline::types::Pose;
+
+    /// A straight trajectory along +x.
+    fn refl() -> RefLine {
+        let poses = (0..=60)
+            .map(|i| Pose {
+                time: i as f64,
+                x: i as f64 - 10.0,
+                y: 0.0,
+                z: 0.0,
+                heading_deg: None,
+                roll_deg: None,
+                pitch_deg: None,
+            })
+            .collect();
+        RefLine::new(&Trajectory::new(poses).unwrap())
+    }
+
+    /// Points on a 3 cm grid where `inside(x, y)`, for x in 0..len, |y - 2| < 0.5.
+    fn paint(len: f64, inside: impl Fn(f64, f64) -> bool) -> Vec<[f64; 2]> {
+        let mut v = Vec::new();
+        for i in 0..=(len / 0.03) as usize {
+            for j in 0..=33 {
+                let (x, y) = (i as f64 * 0.03, j as f64 * 0.03 - 0.5);
+                if inside(x, y) {
+                    v.push([x, 2.0 + y]);
+                }
+            }
+        }
+        v
+    }
+
+    /// A straight arrow (4 m shaft 0.25 m wide, 2 m head 0.75 m wide at its base) is no
+    /// line even though its overall width (≈ 0.5 m) is under `line_max_width_m`; a
+    /// uniform line, and a double line worn away on one side in stretches, are lines.
+    #[test]
+    fn arrows_are_no_lines_uniform_and_worn_double_lines_are() {
+        let (r, p) = (refl(), Params::default());
+        let arrow = paint(6.0, |x, y| {
+            if x < 4.0 {
+                y.abs() <= 0.125
+            } else {
+                y.abs() <= 0.375 * (6.0 - x) / 2.0
+            }
+        });
+        assert!(line_geometry(&arrow, &r, &p).is_none());
+        let line = paint(6.0, |_, y| y.abs() <= 0.075);
+        let g = line_geometry(&line, &r, &p).expect("a uniform line is a line");
+        assert!((g.width_m - 0.15).abs() < 0.04, "width {}", g.width_m);
+        // Two 0.15 m lines 0.15 m apart; the upper one worn away over 1 m of every 2 m.
+        let double = paint(8.0, |x, y| {
+            let lower = (-0.225..=-0.075).contains(&y);
+            let upper = (0.075..=0.225).contains(&y) && (x % 2.0) < 1.0;
+            lower || upper
+        });
+        assert!(line_geometry(&double, &r, &p).is_some());
     }
 }
