@@ -35,9 +35,10 @@
 //! applied to the marking candidates: a marking is kept only where it lies on the road
 //! surface the pavement stage fitted, here checked locally against the asphalt beside it.
 //!
-//! **Complexity.** O(n) to bucket the points by slice, then per group a scan of its slice:
-//! O(n · g / s) for g groups over s slices; groups run in parallel and are independent,
-//! so the result does not depend on the order of the groups or of the points.
+//! **Complexity.** O(n) to bucket the points by slice; each slice holding a group is
+//! gathered and sorted by offset once (O(n log n) in all, slices in parallel), then each
+//! group's band is a binary search. Groups are independent and the points of a slice are
+//! put in a total order first, so the result does not depend on the order of the points.
 
 use super::pavement::{check_range, lsq_plane};
 use rayon::prelude::*;
@@ -116,6 +117,9 @@ pub struct Input<'a> {
     pub label: &'a [u32],
 }
 
+/// A marking point as this step groups it: (slice, mask component, point index).
+type Mark = (i64, u32, usize);
+
 /// Median of a scratch slice (reorders it); `v` is non-empty.
 fn median(v: &mut [f64]) -> f64 {
     let k = v.len() / 2;
@@ -148,12 +152,12 @@ pub fn clear_verge(input: &Input<'_>, is_mark: &mut [bool], p: &Params) -> usize
         fill[k] += 1;
     }
     // Marking groups: (slice, component) → point indices, in a canonical order.
-    let mut marks: Vec<(i64, u32, usize)> = (0..n)
+    let mut marks: Vec<Mark> = (0..n)
         .filter(|&i| is_mark[i] && input.label[i] != 0)
         .map(|i| (input.slice[i], input.label[i], i))
         .collect();
     marks.sort_unstable();
-    let mut groups: Vec<&[(i64, u32, usize)]> = Vec::new();
+    let mut groups: Vec<&[Mark]> = Vec::new();
     let mut a = 0;
     for b in 1..=marks.len() {
         if b == marks.len() || (marks[b].0, marks[b].1) != (marks[a].0, marks[a].1) {
@@ -161,15 +165,38 @@ pub fn clear_verge(input: &Input<'_>, is_mark: &mut [bool], p: &Params) -> usize
             a = b;
         }
     }
+    groups.retain(|g| g.len() >= p.min_points as usize);
+    // Per slice that holds a group: its unmarked points sorted by offset (one gather of the
+    // slice, then every band is a binary search), and the decisions on its groups.
+    let mut runs: Vec<&[&[Mark]]> = Vec::new();
+    let mut a = 0;
+    for b in 1..=groups.len() {
+        if b == groups.len() || groups[b][0].0 != groups[a][0].0 {
+            runs.push(&groups[a..b]);
+            a = b;
+        }
+    }
     let mark_flags: &[bool] = is_mark;
-    let cleared: Vec<usize> = groups
+    let cleared: Vec<usize> = runs
         .par_iter()
-        .filter(|g| g.len() >= p.min_points as usize)
-        .filter(|g| {
-            let k = (g[0].0 - s0) as usize;
-            below_road(g, &by_slice[start[k]..start[k + 1]], input, mark_flags, p)
+        .flat_map_iter(|run| {
+            let k = (run[0][0].0 - s0) as usize;
+            let mut asphalt: Vec<[f64; 3]> = by_slice[start[k]..start[k + 1]]
+                .iter()
+                .filter(|&&i| !mark_flags[i])
+                .map(|&i| [input.offset[i], input.mileage[i], input.z[i]])
+                .collect();
+            // A total order on the points, so the fit does not depend on the input order.
+            asphalt.sort_unstable_by(|x, y| {
+                x[0].total_cmp(&y[0])
+                    .then(x[1].total_cmp(&y[1]))
+                    .then(x[2].total_cmp(&y[2]))
+            });
+            run.iter()
+                .filter(|g| below_road(g, &asphalt, input, p))
+                .flat_map(|g| g.iter().map(|&(_, _, i)| i))
+                .collect::<Vec<usize>>()
         })
-        .flat_map_iter(|g| g.iter().map(|&(_, _, i)| i))
         .collect();
     for &i in &cleared {
         is_mark[i] = false;
@@ -178,13 +205,7 @@ pub fn clear_verge(input: &Input<'_>, is_mark: &mut [bool], p: &Params) -> usize
 }
 
 /// Whether one group (points of one slice and component) lies below the asphalt beside it.
-fn below_road(
-    group: &[(i64, u32, usize)],
-    slice_points: &[usize],
-    input: &Input<'_>,
-    is_mark: &[bool],
-    p: &Params,
-) -> bool {
+fn below_road(group: &[Mark], asphalt: &[[f64; 3]], input: &Input<'_>, p: &Params) -> bool {
     let (o, m, z) = (input.offset, input.mileage, input.z);
     let mut scratch: Vec<f64> = group.iter().map(|&(_, _, i)| o[i]).collect();
     let side = if median(&mut scratch) < 0.0 { -1.0 } else { 1.0 };
@@ -199,19 +220,23 @@ fn below_road(
         return false; // across the trajectory or not a line piece
     }
     let (band_lo, band_hi) = (inner - p.gap_m - p.reference_width_m, inner - p.gap_m);
-    let reference: Vec<[f64; 3]> = slice_points
-        .iter()
-        .filter(|&&i| !is_mark[i])
-        .filter(|&&i| {
-            let u = side * o[i];
-            u >= band_lo && u < band_hi
-        })
-        .map(|&i| [o[i], m[i], z[i]])
-        .collect();
+    // The band in offset (`asphalt` is sorted by offset).
+    let (lo, hi) = if side > 0.0 {
+        (
+            asphalt.partition_point(|r| r[0] < band_lo),
+            asphalt.partition_point(|r| r[0] < band_hi),
+        )
+    } else {
+        (
+            asphalt.partition_point(|r| r[0] <= -band_hi),
+            asphalt.partition_point(|r| r[0] <= -band_lo),
+        )
+    };
+    let reference = &asphalt[lo..hi.max(lo)];
     if reference.len() < p.min_reference_points as usize {
         return false;
     }
-    let Some(plane) = lsq_plane(&reference) else {
+    let Some(plane) = lsq_plane(reference) else {
         return false;
     };
     let mut res: Vec<f64> = reference.iter().map(|r| r[2] - plane.at(r[0], r[1])).collect();
