@@ -36,9 +36,9 @@
 //! surface the pavement stage fitted, here checked locally against the asphalt beside it.
 //!
 //! **Complexity.** O(n) to bucket the points by slice; each slice holding a group is
-//! gathered and sorted by offset once (O(n log n) in all, slices in parallel), then each
-//! group's band is a binary search. Groups are independent and the points of a slice are
-//! put in a total order first, so the result does not depend on the order of the points.
+//! gathered once into contiguous memory (slices in parallel), then each group scans it:
+//! O(n + Σ groups × slice points), the scans being sequential reads. Each band is put in a
+//! total order before the fit, so the result does not depend on the order of the points.
 
 use super::pavement::{check_range, lsq_plane};
 use rayon::prelude::*;
@@ -166,8 +166,9 @@ pub fn clear_verge(input: &Input<'_>, is_mark: &mut [bool], p: &Params) -> usize
         }
     }
     groups.retain(|g| g.len() >= p.min_points as usize);
-    // Per slice that holds a group: its unmarked points sorted by offset (one gather of the
-    // slice, then every band is a binary search), and the decisions on its groups.
+    // Per slice that holds a group: its unmarked points gathered once into contiguous
+    // memory (each group's band is then a linear scan of it), and the decisions on its
+    // groups.
     let mut runs: Vec<&[&[Mark]]> = Vec::new();
     let mut a = 0;
     for b in 1..=groups.len() {
@@ -181,17 +182,11 @@ pub fn clear_verge(input: &Input<'_>, is_mark: &mut [bool], p: &Params) -> usize
         .par_iter()
         .flat_map_iter(|run| {
             let k = (run[0][0].0 - s0) as usize;
-            let mut asphalt: Vec<[f64; 3]> = by_slice[start[k]..start[k + 1]]
+            let asphalt: Vec<[f64; 3]> = by_slice[start[k]..start[k + 1]]
                 .iter()
                 .filter(|&&i| !mark_flags[i])
                 .map(|&i| [input.offset[i], input.mileage[i], input.z[i]])
                 .collect();
-            // A total order on the points, so the fit does not depend on the input order.
-            asphalt.sort_unstable_by(|x, y| {
-                x[0].total_cmp(&y[0])
-                    .then(x[1].total_cmp(&y[1]))
-                    .then(x[2].total_cmp(&y[2]))
-            });
             run.iter()
                 .filter(|g| below_road(g, &asphalt, input, p))
                 .flat_map(|g| g.iter().map(|&(_, _, i)| i))
@@ -220,23 +215,25 @@ fn below_road(group: &[Mark], asphalt: &[[f64; 3]], input: &Input<'_>, p: &Param
         return false; // across the trajectory or not a line piece
     }
     let (band_lo, band_hi) = (inner - p.gap_m - p.reference_width_m, inner - p.gap_m);
-    // The band in offset (`asphalt` is sorted by offset).
-    let (lo, hi) = if side > 0.0 {
-        (
-            asphalt.partition_point(|r| r[0] < band_lo),
-            asphalt.partition_point(|r| r[0] < band_hi),
-        )
-    } else {
-        (
-            asphalt.partition_point(|r| r[0] <= -band_hi),
-            asphalt.partition_point(|r| r[0] <= -band_lo),
-        )
-    };
-    let reference = &asphalt[lo..hi.max(lo)];
+    let mut reference: Vec<[f64; 3]> = asphalt
+        .iter()
+        .filter(|r| {
+            let u = side * r[0];
+            u >= band_lo && u < band_hi
+        })
+        .copied()
+        .collect();
     if reference.len() < p.min_reference_points as usize {
         return false;
     }
-    let Some(plane) = lsq_plane(reference) else {
+    // A total order on the band, so that not even the rounding of the fit depends on the
+    // order of the points.
+    reference.sort_unstable_by(|x, y| {
+        x[0].total_cmp(&y[0])
+            .then(x[1].total_cmp(&y[1]))
+            .then(x[2].total_cmp(&y[2]))
+    });
+    let Some(plane) = lsq_plane(&reference) else {
         return false;
     };
     let mut res: Vec<f64> = reference.iter().map(|r| r[2] - plane.at(r[0], r[1])).collect();
