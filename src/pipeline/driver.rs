@@ -8,7 +8,8 @@
 //!    `pavement.max_offset_m` of it, then appended to the chunks that see its mileage
 //!    ([`chunk::Store`], spilling to disk beyond `chunk.memory_budget_mb`).
 //! 2. Per chunk, in mileage order: pavement, background normalisation + IDW, adaptive
-//!    threshold, and the marking points of the chunk's *core* (each point belongs to exactly
+//!    threshold, the verge check ([`pavement_verge`]), and the marking points of the
+//!    chunk's *core* (each point belongs to exactly
 //!    one core, so no point is counted twice).
 //! 3. *cluster*: marking points are clustered across chunk joins by a streaming scheme:
 //!    clusters that come within `JOIN_MARGIN_M` of the next core stay open and are
@@ -27,7 +28,9 @@ use super::chunk::{ChunkPoints, Plan, Store};
 use super::error::PipelineError;
 use super::params::ValidParams;
 use super::types::{Crs, Extraction, PointCloud, StationIndex, Trajectory};
-use super::{Inputs, Progress, classify, cluster, io, pavement, rasterize, threshold, vectorize};
+use super::{
+    Inputs, Progress, classify, cluster, io, pavement, pavement_verge, rasterize, threshold, vectorize,
+};
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -417,6 +420,27 @@ fn marking_points(
             let mut marks = threshold::points_from_mask(&seg, &px, py, &values, &p.threshold);
             let z = gather_f64(&c.z);
             threshold::clear_unflat(&px, py, &z, &mut marks, &p.threshold);
+            // Bright verge beyond the asphalt: candidates lying below the road beside them.
+            let label: Vec<u32> = px
+                .par_iter()
+                .zip(py.par_iter())
+                .map(|(&x, &y)| {
+                    seg.mask
+                        .cell_of(x, y)
+                        .map_or(0, |(col, row)| seg.labels[row * seg.mask.width + col])
+                })
+                .collect();
+            pavement_verge::clear_verge(
+                &pavement_verge::Input {
+                    mileage: &px,
+                    offset: py,
+                    z: &z,
+                    slice: &slice,
+                    label: &label,
+                },
+                &mut marks,
+                &p.pavement.verge,
+            );
             ctx.stats.add(3, t0);
             ctx.check()?;
             marks

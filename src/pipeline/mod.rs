@@ -34,6 +34,8 @@ pub mod params;
 pub mod pavement;
 /// Stage 1, alternative: the scan-line pavement method (Yao 2021).
 pub mod pavement_scanline;
+/// Stage 3, refinement: bright verge strips below the road's plane are not paint.
+pub mod pavement_verge;
 /// Stage 2: IDW intensity rasterisation with range/incidence normalisation.
 pub mod rasterize;
 /// The smoothed trajectory frame (mileage, offset) used by classify and vectorize.

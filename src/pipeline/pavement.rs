@@ -36,13 +36,18 @@
 //! [`super::pavement_scanline`]) for single-head data in acquisition order;
 //! `method: "none"` keeps every point (input already cut to the road).
 //!
+//! Where the asphalt ends at a verge instead of a curb, the verge's first strip survives
+//! these tests (it is nearly flat and at road height); once the marking candidates are
+//! known, [`super::pavement_verge`] (`verge` parameters) clears those that lie below the
+//! asphalt beside them.
+//!
 //! **Parameters** ([`Params`], defaults): `slice_length_m` 2.0 (paper D), `pseudo_bin_m`
 //! 0.05 (paper W), `ransac_iterations` 200, `ransac_tolerance_m` 0.04, `buffer_below_m`
 //! 0.3, `buffer_above_m` 0.3, `window_m` 0.4 (paper), `road_thickness_m` 0.06,
 //! `max_cross_slope` 0.1, `max_gap_m` 3.0, `max_offset_m` 30, `reenter` true,
 //! `reentry_min_width_m` 3, `reentry_min_separation_m` 1, `reentry_max_step_m` 1,
 //! `edge_margin_m` 0.05 (points this close to the face of a curb or barrier are cut with it),
-//! `seed` 0.
+//! `seed` 0; `verge` (nested, see [`super::pavement_verge`]).
 //!
 //! **Reference.** Yao L., Qin C., Chen Q., Wu H., Zhang S. (2019) Automatic extraction and
 //! recognition of road markings based on vehicle laser point cloud, ISPRS Archives.
@@ -51,7 +56,7 @@
 //! stops adaptively once the inlier ratio makes a better plane unlikely.
 
 use super::geom::floor_i64;
-use super::pavement_scanline;
+use super::{pavement_scanline, pavement_verge};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
@@ -113,6 +118,9 @@ pub struct Params {
     pub seed: u64,
     /// Parameters of the scan-line method (`method: "scan_lines"`).
     pub scan_lines: pavement_scanline::Params,
+    /// Bright verge strips beyond the asphalt, cleared after thresholding (see
+    /// [`super::pavement_verge`]).
+    pub verge: pavement_verge::Params,
 }
 
 impl Default for Params {
@@ -137,6 +145,7 @@ impl Default for Params {
             edge_margin_m: 0.05,
             seed: 0,
             scan_lines: pavement_scanline::Params::default(),
+            verge: pavement_verge::Params::default(),
         }
     }
 }
@@ -177,7 +186,10 @@ impl Params {
         )?;
         check_range("reentry_max_step_m", self.reentry_max_step_m, 0.0, 100.0)?;
         check_range("edge_margin_m", self.edge_margin_m, 0.0, 2.0)?;
-        self.scan_lines.validate().map_err(|e| format!("scan_lines.{e}"))
+        self.scan_lines
+            .validate()
+            .map_err(|e| format!("scan_lines.{e}"))?;
+        self.verge.validate().map_err(|e| format!("verge.{e}"))
     }
 }
 
@@ -278,7 +290,7 @@ impl Plane {
 
 /// Least-squares plane through points (u, s, z); `None` when degenerate. The grade term
 /// is dropped (c = 0) when the points do not spread along s.
-fn lsq_plane(pts: &[[f64; 3]]) -> Option<Plane> {
+pub(crate) fn lsq_plane(pts: &[[f64; 3]]) -> Option<Plane> {
     let n = pts.len() as f64;
     if pts.len() < 2 {
         return None;
