@@ -36,7 +36,8 @@
 //!    Hermite joins the fitted ends (values and slopes), so the line follows the road's
 //!    curvature through occlusions. Sampled every `vertex_spacing_m`, mapped back through
 //!    the reference frame and simplified (Douglas–Peucker, `simplify_tolerance_m`).
-//! 5. Lane lines shorter than `min_length_m`, and single pieces that are not solid, are
+//! 5. Lane lines shorter than `min_length_m` or whose pieces cover less than
+//!    `min_paint_share` of their length, and single pieces that are not solid, are
 //!    dropped: isolated dashes or noise do not make lane lines.
 //!
 //! Confidence: the mean piece confidence × support (pieces and painted length) × fit
@@ -72,6 +73,10 @@ pub struct Params {
     pub min_width_similarity: f64,
     /// Shortest lane line kept (m). Default 15.
     pub min_length_m: f64,
+    /// Smallest share of a lane line's length its pieces must cover. Default 0.1: a dashed
+    /// line paints 25–40 % (MUTCD 3/9 m, GB 2/4 m, 6/9 m) and keeps a tenth through
+    /// occlusions; two stray fragments 30 m apart do not make a lane line.
+    pub min_paint_share: f64,
     /// Painted runs up to this long count as dashes (m). Default 10.
     pub dash_max_run_m: f64,
     /// Fewest dashes that make a dashed lane line (or dashed stretch). Default 3.
@@ -98,6 +103,7 @@ impl Default for Params {
             max_angle_deg: 5.0,
             min_width_similarity: 0.5,
             min_length_m: 15.0,
+            min_paint_share: 0.1,
             dash_max_run_m: 10.0,
             min_dashes: 3,
             run_join_gap_m: 1.0,
@@ -118,6 +124,7 @@ impl Params {
             ("max_angle_deg", self.max_angle_deg, 0.0, 45.0),
             ("min_width_similarity", self.min_width_similarity, 0.0, 1.0),
             ("min_length_m", self.min_length_m, 0.0, 1000.0),
+            ("min_paint_share", self.min_paint_share, 0.0, 1.0),
             ("dash_max_run_m", self.dash_max_run_m, 0.1, 100.0),
             ("run_join_gap_m", self.run_join_gap_m, 0.0, 10.0),
             ("smoothing_m", self.smoothing_m, 0.1, 50.0),
@@ -397,14 +404,17 @@ pub fn grow_with_barriers(
             if s1 - s0 < p.min_length_m || (members.len() == 1 && class != LaneLineClass::SolidLine) {
                 continue;
             }
-            let (line, rms) = centreline(&items, &members, &refl, p);
-            if line.len() < 2 {
-                continue;
-            }
             let painted: f64 = members
                 .iter()
                 .map(|&m| items[m].so[items[m].so.len() - 1][0] - items[m].so[0][0])
                 .sum();
+            if painted < p.min_paint_share * (s1 - s0) {
+                continue;
+            }
+            let (line, rms) = centreline(&items, &members, &refl, p);
+            if line.len() < 2 {
+                continue;
+            }
             let mean_conf = members.iter().map(|&m| items[m].conf).sum::<f64>() / members.len() as f64;
             let support = (members.len() as f64 / 4.0).max(painted / 20.0).min(1.0);
             let fit = (-(rms / 0.05).powi(2) / 2.0).exp();
@@ -704,4 +714,60 @@ fn centreline(items: &[Item], members: &[usize], refl: &RefLine, p: &Params) -> 
     let line: Vec<[f64; 2]> = stations.iter().map(|&s| refl.point(s, offset_at(s))).collect();
     let rms = (so.iter().map(|q| (q[1] - fit(q[0]).0).powi(2)).sum::<f64>() / so.len() as f64).sqrt();
     (geom::simplify(&line, p.simplify_tolerance_m), rms)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipeline::types::Pose;
+
+    fn traj() -> Trajectory {
+        let poses = (0..=100)
+            .map(|i| Pose {
+                time: i as f64,
+                x: i as f64 - 20.0,
+                y: 0.0,
+                z: 0.0,
+                heading_deg: None,
+                roll_deg: None,
+                pitch_deg: None,
+            })
+            .collect();
+        Trajectory::new(poses).unwrap()
+    }
+
+    fn piece(key: usize, x0: f64, x1: f64, class: MarkingClass) -> LanePiece {
+        LanePiece {
+            key,
+            class,
+            centerline: vec![[x0, 3.5], [x1, 3.5]],
+            width_m: 0.15,
+            confidence: 0.9,
+        }
+    }
+
+    /// Two 1 m solid fragments 30 m apart cover 6 % of the line they would span: no lane
+    /// line (unless `min_paint_share` is 0); a 2/4 m dashed line (33 % painted) is one.
+    #[test]
+    fn stray_fragments_make_no_lane_line_and_dashes_do() {
+        let t = traj();
+        let p = Params::default();
+        let stray = [
+            piece(0, 0.0, 1.0, MarkingClass::SolidLine),
+            piece(1, 31.0, 32.0, MarkingClass::SolidLine),
+        ];
+        assert!(grow(&stray, &t, &p).lines.is_empty());
+        let lenient = Params {
+            min_paint_share: 0.0,
+            ..Params::default()
+        };
+        assert_eq!(grow(&stray, &t, &lenient).lines.len(), 1);
+        let dashes: Vec<LanePiece> = (0..8)
+            .map(|i| piece(i, 6.0 * i as f64, 6.0 * i as f64 + 2.0, MarkingClass::DashedLine))
+            .collect();
+        let lanes = grow(&dashes, &t, &p);
+        assert_eq!(lanes.lines.len(), 1);
+        assert_eq!(lanes.lines[0].class, LaneLineClass::DashedLine);
+        assert_eq!(lanes.lines[0].pieces.len(), 8);
+    }
 }
