@@ -22,7 +22,11 @@
 //! 2. the plane `z = a + b·offset + c·mileage` is fitted to it by least squares;
 //! 3. the group is cleared when the median height of its points lies more than
 //!    max(`min_drop_m`, `noise_factor` × σ / √n) *below* that plane (σ the reference's
-//!    noise, n the group's points: the median of a noisy strip is not mistaken for a drop).
+//!    noise, n the group's points: the median of a noisy strip is not mistaken for a drop)
+//!    — unless the unmarked surface in the band of `reference_width_m` just beyond it
+//!    (`gap_m` past its outer edge, at least `min_reference_points` points) is back at the
+//!    plane's level: a verge keeps falling away, a line sunk in a rut or lowered by a
+//!    scanner's per-laser height bias (a ring scan) has road beyond it.
 //!
 //! Only drops count: a line raised above a rutted wheel path beside it, or standing on a
 //! crown, is still paint. Groups with fewer than `min_points` points are left alone.
@@ -253,7 +257,22 @@ fn below_road(group: &[Mark], asphalt: &[[f64; 3]], input: &Input<'_>, p: &Param
     let need = p
         .min_drop_m
         .max(p.noise_factor * sigma / (group.len() as f64).sqrt());
-    h < -need
+    if h >= -need {
+        return false;
+    }
+    // A verge keeps falling away beyond the strip; where the surface beyond it is back at
+    // the road's level the strip lies in the road (a line in a rut, or a scanner's
+    // per-laser height bias on a ring scan): paint, not verge.
+    let (out_lo, out_hi) = (outer + p.gap_m, outer + p.gap_m + p.reference_width_m);
+    let mut beyond: Vec<f64> = asphalt
+        .iter()
+        .filter(|r| {
+            let u = side * r[0];
+            u >= out_lo && u < out_hi
+        })
+        .map(|r| r[2] - plane.at(r[0], r[1]))
+        .collect();
+    beyond.len() < p.min_reference_points as usize || median(&mut beyond) < -need
 }
 
 #[cfg(test)]
