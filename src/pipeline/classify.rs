@@ -914,20 +914,12 @@ fn confirm_groups(items: &mut [(Candidate, Option<DropReason>)]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pipeline::types::Pose;
+    use crate::pipeline::types::test_pose;
 
     /// A straight trajectory along +x.
     fn refl() -> RefLine {
         let poses = (0..=60)
-            .map(|i| Pose {
-                time: i as f64,
-                x: i as f64 - 10.0,
-                y: 0.0,
-                z: 0.0,
-                heading_deg: None,
-                roll_deg: None,
-                pitch_deg: None,
-            })
+            .map(|i| test_pose(i as f64, i as f64 - 10.0, 0.0))
             .collect();
         RefLine::new(&Trajectory::new(poses).unwrap())
     }

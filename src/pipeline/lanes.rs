@@ -719,19 +719,11 @@ fn centreline(items: &[Item], members: &[usize], refl: &RefLine, p: &Params) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pipeline::types::Pose;
+    use crate::pipeline::types::test_pose;
 
     fn traj() -> Trajectory {
         let poses = (0..=100)
-            .map(|i| Pose {
-                time: i as f64,
-                x: i as f64 - 20.0,
-                y: 0.0,
-                z: 0.0,
-                heading_deg: None,
-                roll_deg: None,
-                pitch_deg: None,
-            })
+            .map(|i| test_pose(i as f64, i as f64 - 20.0, 0.0))
             .collect();
         Trajectory::new(poses).unwrap()
     }

@@ -705,20 +705,26 @@ pub struct Extraction {
     pub crs: Option<Crs>,
 }
 
+/// A flat pose with no attitude, for the unit tests of the pipeline modules.
+#[cfg(test)]
+pub(crate) fn test_pose(time: f64, x: f64, y: f64) -> Pose {
+    Pose {
+        time,
+        x,
+        y,
+        z: 0.0,
+        heading_deg: None,
+        roll_deg: None,
+        pitch_deg: None,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     fn pose(t: f64, x: f64, y: f64) -> Pose {
-        Pose {
-            time: t,
-            x,
-            y,
-            z: 0.0,
-            heading_deg: None,
-            roll_deg: None,
-            pitch_deg: None,
-        }
+        test_pose(t, x, y)
     }
 
     #[test]
