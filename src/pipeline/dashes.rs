@@ -28,6 +28,8 @@
 //!
 //! **Complexity.** O(d log d) for d dashes.
 
+use super::geom::median;
+
 /// One dash as seen along its lane line.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Span {
@@ -50,16 +52,6 @@ pub struct Plan {
     /// The design found: dash length and period (m).
     pub dash_length: f64,
     pub period: f64,
-}
-
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
 }
 
 /// The regularisation plan of one dashed lane line (see the module docs). `fill_max` is the

@@ -336,6 +336,19 @@ pub fn quantile_sorted(v: &[f64], q: f64) -> f64 {
     }
 }
 
+/// Deterministic jitter in [-0.5, 0.5) for hand-made test scenes (a 64-bit LCG; no
+/// dependency on the rand API in unit tests).
+#[cfg(test)]
+pub(crate) fn test_jitter(seed: u64) -> impl FnMut() -> f64 {
+    let mut k = seed;
+    move || {
+        k = k
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((k >> 33) as f64 / (1u64 << 31) as f64) - 0.5
+    }
+}
+
 /// Median of the values (sorts them in place). NaN when empty.
 pub fn median(v: &mut [f64]) -> f64 {
     v.sort_unstable_by(f64::total_cmp);

@@ -665,13 +665,7 @@ mod tests {
     /// u < -5. Points on a jittered 2.5 cm grid, deterministic.
     fn scene() -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<bool>) {
         let (mut m, mut u, mut z, mut road) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-        let mut k = 0u64;
-        let mut jit = || {
-            k = k
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((k >> 33) as f64 / (1u64 << 31) as f64) - 0.5
-        };
+        let mut jit = crate::pipeline::geom::test_jitter(0);
         for i in 0..400 {
             for j in 0..500 {
                 let mm = i as f64 * 0.025 + 0.01 * jit();
@@ -721,13 +715,7 @@ mod tests {
     #[test]
     fn the_foot_of_a_wall_is_cut_with_it() {
         let (mut m, mut u, mut z) = (Vec::new(), Vec::new(), Vec::new());
-        let mut k = 7u64;
-        let mut jit = || {
-            k = k
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((k >> 33) as f64 / (1u64 << 31) as f64) - 0.5
-        };
+        let mut jit = crate::pipeline::geom::test_jitter(7);
         for i in 0..200 {
             let mm = i as f64 * 0.05;
             for j in 0..200 {

@@ -285,13 +285,7 @@ mod tests {
     /// height noise; `marked(u)` says which offsets the threshold marked.
     fn slice(edge: f64, verge_slope: f64, marked: impl Fn(f64) -> bool, paint_mm: f64) -> Scene {
         let mut s = Scene::default();
-        let mut k = 11u64;
-        let mut jit = || {
-            k = k
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((k >> 33) as f64 / (1u64 << 31) as f64) - 0.5
-        };
+        let mut jit = crate::pipeline::geom::test_jitter(11);
         for i in 0..80 {
             for j in 0..200 {
                 // Within one slice [0, 2) whatever the jitter.
