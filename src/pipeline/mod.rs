@@ -11,6 +11,8 @@ pub mod chunk;
 pub mod classify;
 /// Stage 4: Euclidean clustering of marking points.
 pub mod cluster;
+/// Crosswalk regularisation: the stripes of one crossing share one design.
+pub mod crosswalks;
 pub mod dashes;
 /// The driver behind [`run`]: chunk loop, streaming clusters, statistics.
 pub mod driver;

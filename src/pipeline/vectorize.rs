@@ -29,6 +29,7 @@
 //! O(n log n) for the alpha shapes of n points; see `lanes` for the growth.
 
 use super::classify::Candidate;
+use super::crosswalks;
 use super::dashes;
 use super::geom;
 use super::lanes::{self, LanePiece};
@@ -62,6 +63,19 @@ pub struct Params {
     /// With `regularize_dashes`: at most this many consecutive missing dashes of a regular
     /// run are added (confidence halved, no points); 0 adds none. Default 1.
     pub fill_missing_dashes: u32,
+    /// Line pieces whose width the points do not resolve (fewer than about two points
+    /// across: sparse far-range scan lines) get the width of their lane line's resolved
+    /// pieces, or measured width + one point spacing (at most 0.1 m more) when their lane
+    /// line has none (see [`widen_undersampled`]). Default true.
+    pub widen_undersampled: bool,
+    /// The stripes of a zebra crossing (≥ 3 crosswalk stripes side by side) get the
+    /// crossing's design: the common stripe width and the two edges their ends line up on;
+    /// worn fragments lying on a stripe's position are absorbed into it (see `crosswalks`).
+    /// Default true.
+    pub regularize_crosswalks: bool,
+    /// With `regularize_crosswalks`: at most this many consecutive missing stripes of a
+    /// regular crossing are added (confidence halved, no points); 0 adds none. Default 1.
+    pub fill_missing_stripes: u32,
     /// Lane-line growth.
     pub lane_lines: lanes::Params,
 }
@@ -75,6 +89,9 @@ impl Default for Params {
             bridge_solid_gap_m: 4.0,
             regularize_dashes: true,
             fill_missing_dashes: 1,
+            widen_undersampled: true,
+            regularize_crosswalks: true,
+            fill_missing_stripes: 1,
             lane_lines: lanes::Params::default(),
         }
     }
@@ -113,6 +130,12 @@ impl Params {
                 self.fill_missing_dashes
             ));
         }
+        if self.fill_missing_stripes > 10 {
+            return Err(format!(
+                "fill_missing_stripes must be in [0, 10], got {}",
+                self.fill_missing_stripes
+            ));
+        }
         self.lane_lines.validate()
     }
 }
@@ -123,6 +146,11 @@ pub struct Piece {
     pub marking: Marking,
     /// Centreline of pieces along the road (dashes, solid pieces), driving order.
     pub centerline: Option<Vec<[f64; 2]>>,
+    /// `Some(point spacing)` (m) when the painted width of this line piece is not resolved
+    /// by its points: fewer than about two points across it (far-range scan lines cross a
+    /// 0.15 m line with one return), so the measured width under-reads the paint. See
+    /// [`widen_undersampled`].
+    pub undersampled: Option<f64>,
 }
 
 /// Heading in degrees clockwise from north of direction `d` (x east, y north), in [0, 360).
@@ -151,6 +179,15 @@ pub fn outlines(cloud: &PointCloud, candidates: &[Candidate], params: &Params) -
             } else {
                 s.axis
             };
+            // Fewer than about two points across the line: the width is not resolved.
+            let undersampled = c
+                .line
+                .as_ref()
+                .filter(|l| {
+                    matches!(c.class, MarkingClass::SolidLine | MarkingClass::DashedLine)
+                        && l.width_m < UNRESOLVED_POINTS_ACROSS * s.spacing_m
+                })
+                .map(|_| s.spacing_m);
             let (ring, length, width, heading, centerline) = match c.class {
                 MarkingClass::SolidLine | MarkingClass::DashedLine if c.line.is_some() => {
                     let l = c.line.as_ref().expect("checked");
@@ -249,10 +286,116 @@ pub fn outlines(cloud: &PointCloud, candidates: &[Candidate], params: &Params) -
                     heading_deg: heading,
                     point_count: c.indices.len(),
                 },
+                undersampled: undersampled.filter(|_| centerline.is_some()),
                 centerline,
             })
         })
         .collect()
+}
+
+/// A line piece narrower than this many point spacings is not resolved across.
+const UNRESOLVED_POINTS_ACROSS: f64 = 2.0;
+
+/// At most this much (m) is added to an unresolved width when no lane-line reference exists
+/// (as in `classify`'s judgement of sparse lines: scattered noise is not made wide).
+const MAX_UNRESOLVED_PAD_M: f64 = 0.1;
+
+/// Widen the line pieces whose painted width their points do not resolve (see
+/// [`Piece::undersampled`]) to the width of their lane line: the length-weighted median
+/// width of the line's resolved solid and dashed pieces (a lane line is painted with one
+/// width), or, on a lane line without resolved pieces or on none, to the measured width +
+/// one point spacing (a return stands for a patch of about one spacing, half of it beyond
+/// the outermost return on each side), at most [`MAX_UNRESOLVED_PAD_M`] more. Pieces are
+/// never narrowed. Rectangles widen about their long axis, other outlines are re-buffered
+/// from the centreline.
+fn widen_undersampled(pieces: &mut [Piece], lines: &[lanes::LaneResult], simplify_m: f64) {
+    let mut reference: Vec<Option<f64>> = vec![None; pieces.len()];
+    for l in lines {
+        let mut ws: Vec<(f64, f64)> = l
+            .pieces
+            .iter()
+            .map(|&k| &pieces[k])
+            .filter(|p| {
+                p.undersampled.is_none()
+                    && matches!(
+                        p.marking.class,
+                        MarkingClass::SolidLine | MarkingClass::DashedLine
+                    )
+                    && p.marking.point_count > 0
+            })
+            .map(|p| (p.marking.width_m, p.marking.length_m.max(0.0)))
+            .collect();
+        let total: f64 = ws.iter().map(|w| w.1).sum();
+        if total < MIN_REFERENCE_LENGTH_M {
+            continue;
+        }
+        ws.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut acc = 0.0;
+        let median = ws
+            .iter()
+            .find(|w| {
+                acc += w.1;
+                acc >= total / 2.0
+            })
+            .map_or(ws[ws.len() - 1].0, |w| w.0);
+        for &k in &l.pieces {
+            reference[k] = Some(median);
+        }
+    }
+    for (k, p) in pieces.iter_mut().enumerate() {
+        let Some(spacing) = p.undersampled else {
+            continue;
+        };
+        let w = p.marking.width_m;
+        let target = reference[k].unwrap_or(w + spacing.min(MAX_UNRESOLVED_PAD_M));
+        if target > w {
+            widen(p, target, simplify_m);
+        }
+    }
+}
+
+/// Resolved pieces of a lane line must cover this much (m) to give it a reference width.
+const MIN_REFERENCE_LENGTH_M: f64 = 2.0;
+
+/// Set a line piece's painted width to `width`: a rectangle moves its long sides outward
+/// (about its axis), any other outline is its centreline buffered anew.
+fn widen(p: &mut Piece, width: f64, simplify_m: f64) {
+    let ring = &p.marking.outline;
+    let d = |a: [f64; 2], b: [f64; 2]| (b[0] - a[0]).hypot(b[1] - a[1]);
+    let new_ring = if ring.len() == 4 {
+        // Corners c0 c1 c2 c3: the shorter of edges c0-c1 and c1-c2 runs across.
+        let (e01, e12) = (d(ring[0], ring[1]), d(ring[1], ring[2]));
+        let (across_from, across_len) = if e01 <= e12 { (0, e01) } else { (1, e12) };
+        let (a, b) = (ring[across_from], ring[across_from + 1]);
+        if across_len <= 0.0 {
+            return;
+        }
+        let n = [(b[0] - a[0]) / across_len, (b[1] - a[1]) / across_len];
+        let e = (width - across_len) / 2.0;
+        // Corners at the start of an across edge move back along n, at its end forward.
+        let mut out = ring.clone();
+        for (i, q) in out.iter_mut().enumerate() {
+            // With across edges (0,1) and (2,3): 0 and 3 are on one long side, 1 and 2 on the
+            // other; with across edges (1,2) and (3,0): 1 and 0 on one, 2 and 3 on the other.
+            let forward = if across_from == 0 {
+                i == 1 || i == 2
+            } else {
+                i == 2 || i == 3
+            };
+            let sgn = if forward { e } else { -e };
+            *q = [q[0] + sgn * n[0], q[1] + sgn * n[1]];
+        }
+        out
+    } else if let Some(cl) = &p.centerline {
+        let simple = geom::simplify(cl, simplify_m / 2.0);
+        outline::buffered_line_simple(&simple, width / 2.0)
+    } else {
+        return;
+    };
+    if new_ring.len() >= 3 && outline::is_simple(&new_ring) {
+        p.marking.outline = new_ring;
+        p.marking.width_m = width;
+    }
 }
 
 /// Alpha-shape outline of an irregular mark, simplified; the rectangle when degenerate.
@@ -328,6 +471,7 @@ fn bridge(a: &Piece, b: &Piece, lane: &[[f64; 2]], max_gap: f64) -> Option<Piece
             point_count: 0,
         },
         centerline: Some(line),
+        undersampled: None,
     })
 }
 
@@ -454,10 +598,83 @@ fn regularise_dashes(pieces: &mut [Piece], lines: &[lanes::LaneResult], params: 
                     point_count: 0,
                 },
                 centerline: Some(line),
+                undersampled: None,
             });
         }
     }
     added
+}
+
+/// Crosswalk stripes put on their crossing's design (see [`super::crosswalks`]); absorbed
+/// fragments are removed, missing stripes added. Runs before the lane-line growth, so
+/// fragments of a stripe never join a lane line.
+fn regularise_crosswalks(mut pieces: Vec<Piece>, refl: &RefLine, fill_max: usize) -> Vec<Piece> {
+    let marks: Vec<crosswalks::Mark> = pieces
+        .iter()
+        .enumerate()
+        .map(|(k, p)| crosswalks::Mark {
+            key: k,
+            class: p.marking.class,
+            ring: p.marking.outline.clone(),
+            confidence: p.marking.confidence,
+            point_count: p.marking.point_count,
+        })
+        .collect();
+    let plan = crosswalks::plan(&marks, fill_max);
+    // Heading of a stripe: its axis pointing along the driving direction.
+    let heading_of = |st: &crosswalks::Stripe| {
+        let n = st.ring.len() as f64;
+        let c = st
+            .ring
+            .iter()
+            .fold([0.0, 0.0], |a, q| [a[0] + q[0] / n, a[1] + q[1] / n]);
+        let dir = refl.direction(refl.locate(c)[0]);
+        let a = st.axis;
+        heading_deg(if a[0] * dir[0] + a[1] * dir[1] < 0.0 {
+            [-a[0], -a[1]]
+        } else {
+            a
+        })
+    };
+    let mut removed = vec![false; pieces.len()];
+    for (k, st, absorbed) in &plan.reshape {
+        let extra: usize = absorbed.iter().map(|&j| pieces[j].marking.point_count).sum();
+        let p = &mut pieces[*k];
+        p.marking.class = MarkingClass::Crosswalk;
+        p.marking.outline = st.ring.to_vec();
+        p.marking.length_m = st.length_m;
+        p.marking.width_m = st.width_m;
+        p.marking.heading_deg = heading_of(st);
+        p.marking.point_count += extra;
+        p.centerline = None;
+        p.undersampled = None;
+        for &j in absorbed {
+            removed[j] = true;
+        }
+    }
+    for (st, confidence) in &plan.fill {
+        pieces.push(Piece {
+            marking: Marking {
+                id: String::new(),
+                class: MarkingClass::Crosswalk,
+                outline: st.ring.to_vec(),
+                confidence: *confidence,
+                length_m: st.length_m,
+                width_m: st.width_m,
+                heading_deg: heading_of(st),
+                point_count: 0,
+            },
+            centerline: None,
+            undersampled: None,
+        });
+    }
+    removed.resize(pieces.len(), false);
+    pieces
+        .into_iter()
+        .zip(removed)
+        .filter(|(_, r)| !r)
+        .map(|(p, _)| p)
+        .collect()
 }
 
 /// Smallest outline area kept (m²): far below any real marking (a 0.1 m x 0.01 m sliver).
@@ -465,6 +682,12 @@ const MIN_OUTLINE_AREA_M2: f64 = 1e-3;
 
 /// Lane lines over all pieces, lane-context class corrections, stable ids.
 pub fn assemble(pieces: Vec<Piece>, traj_abs: &Trajectory, params: &Params) -> (Vec<Marking>, Vec<LaneLine>) {
+    let refl = RefLine::new(traj_abs);
+    let pieces = if params.regularize_crosswalks {
+        regularise_crosswalks(pieces, &refl, params.fill_missing_stripes as usize)
+    } else {
+        pieces
+    };
     let lane_pieces: Vec<LanePiece> = pieces
         .iter()
         .enumerate()
@@ -489,6 +712,9 @@ pub fn assemble(pieces: Vec<Piece>, traj_abs: &Trajectory, params: &Params) -> (
     for &(k, class) in &lanes.classes {
         pieces[k].marking.class = class;
     }
+    if params.widen_undersampled {
+        widen_undersampled(&mut pieces, &lanes.lines, params.outline_simplify_m);
+    }
     // Solid lane lines: short gaps between consecutive solid pieces (worn paint, a car
     // hiding the line) are bridged by a solid piece along the lane line.
     if params.bridge_solid_gap_m > 0.0 {
@@ -511,7 +737,6 @@ pub fn assemble(pieces: Vec<Piece>, traj_abs: &Trajectory, params: &Params) -> (
         pieces.extend(added);
     }
     // Driving order: station of the outline's vertex mean on the absolute reference line.
-    let refl = RefLine::new(traj_abs);
     let mut order: Vec<(f64, f64, usize)> = pieces
         .iter()
         .enumerate()
@@ -630,6 +855,7 @@ mod tests {
                 point_count: 100,
             },
             centerline: Some(vec![[x0, 0.0], [x1, 0.0]]),
+            undersampled: None,
         }
     }
 
