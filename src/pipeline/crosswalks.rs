@@ -95,7 +95,7 @@ struct Seen {
 }
 
 /// Principal axis and (lo, hi) extents along and across it of a ring's vertices.
-fn frame_of(ring: &[[f64; 2]]) -> (Pca, (f64, f64), (f64, f64)) {
+pub(crate) fn frame_of(ring: &[[f64; 2]]) -> (Pca, (f64, f64), (f64, f64)) {
     let pca = Pca::of(ring);
     let mut u = (f64::INFINITY, f64::NEG_INFINITY);
     let mut v = (f64::INFINITY, f64::NEG_INFINITY);

@@ -44,6 +44,8 @@ pub mod rasterize;
 pub mod refline;
 /// Reprojection between the input CRS and WGS84.
 pub mod reproject;
+/// Stop-line joining: the pieces of one stop line become one bar.
+pub mod stoplines;
 /// Stage 3: adaptive (integral-image) thresholding and cleanup.
 pub mod threshold;
 /// Core types: point cloud, trajectory, markings, lane lines.

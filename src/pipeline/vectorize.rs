@@ -35,6 +35,7 @@ use super::geom;
 use super::lanes::{self, LanePiece};
 use super::outline;
 use super::refline::RefLine;
+use super::stoplines;
 use super::types::{LaneLine, LaneLineClass, Marking, MarkingClass, PointCloud, Trajectory};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -76,6 +77,10 @@ pub struct Params {
     /// With `regularize_crosswalks`: at most this many consecutive missing stripes of a
     /// regular crossing are added (confidence halved, no points); 0 adds none. Default 1.
     pub fill_missing_stripes: u32,
+    /// Marks lying on a stop line's centre line beyond its ends (worn pieces, a stop line
+    /// cut by a lane line's end) are joined into it, across gaps up to 1.5 m (see
+    /// `stoplines`). Default true.
+    pub join_stop_lines: bool,
     /// Lane-line growth.
     pub lane_lines: lanes::Params,
 }
@@ -92,6 +97,7 @@ impl Default for Params {
             widen_undersampled: true,
             regularize_crosswalks: true,
             fill_missing_stripes: 1,
+            join_stop_lines: true,
             lane_lines: lanes::Params::default(),
         }
     }
@@ -609,18 +615,7 @@ fn regularise_dashes(pieces: &mut [Piece], lines: &[lanes::LaneResult], params: 
 /// fragments are removed, missing stripes added. Runs before the lane-line growth, so
 /// fragments of a stripe never join a lane line.
 fn regularise_crosswalks(mut pieces: Vec<Piece>, refl: &RefLine, fill_max: usize) -> Vec<Piece> {
-    let marks: Vec<crosswalks::Mark> = pieces
-        .iter()
-        .enumerate()
-        .map(|(k, p)| crosswalks::Mark {
-            key: k,
-            class: p.marking.class,
-            ring: p.marking.outline.clone(),
-            confidence: p.marking.confidence,
-            point_count: p.marking.point_count,
-        })
-        .collect();
-    let plan = crosswalks::plan(&marks, fill_max);
+    let plan = crosswalks::plan(&marks_of(&pieces), fill_max);
     // Heading of a stripe: its axis pointing along the driving direction.
     let heading_of = |st: &crosswalks::Stripe| {
         let n = st.ring.len() as f64;
@@ -668,6 +663,26 @@ fn regularise_crosswalks(mut pieces: Vec<Piece>, refl: &RefLine, fill_max: usize
             undersampled: None,
         });
     }
+    without(pieces, removed)
+}
+
+/// The marks of [`crosswalks`] and [`stoplines`] plans.
+fn marks_of(pieces: &[Piece]) -> Vec<crosswalks::Mark> {
+    pieces
+        .iter()
+        .enumerate()
+        .map(|(k, p)| crosswalks::Mark {
+            key: k,
+            class: p.marking.class,
+            ring: p.marking.outline.clone(),
+            confidence: p.marking.confidence,
+            point_count: p.marking.point_count,
+        })
+        .collect()
+}
+
+/// Pieces without the removed ones.
+fn without(pieces: Vec<Piece>, mut removed: Vec<bool>) -> Vec<Piece> {
     removed.resize(pieces.len(), false);
     pieces
         .into_iter()
@@ -675,6 +690,40 @@ fn regularise_crosswalks(mut pieces: Vec<Piece>, refl: &RefLine, fill_max: usize
         .filter(|(_, r)| !r)
         .map(|(p, _)| p)
         .collect()
+}
+
+/// Stop lines joined with the marks on their centre line (see [`super::stoplines`]); the
+/// joined marks are removed. Runs before the lane-line growth.
+fn join_stop_lines(mut pieces: Vec<Piece>, refl: &RefLine) -> Vec<Piece> {
+    let joins = stoplines::plan(&marks_of(&pieces));
+    let mut removed = vec![false; pieces.len()];
+    for (k, bar, joined) in &joins {
+        let extra: usize = joined.iter().map(|&j| pieces[j].marking.point_count).sum();
+        let n = bar.ring.len() as f64;
+        let c = bar
+            .ring
+            .iter()
+            .fold([0.0, 0.0], |a, q| [a[0] + q[0] / n, a[1] + q[1] / n]);
+        let dir = refl.direction(refl.locate(c)[0]);
+        // Stop lines point to the right of the driving direction (as in `outlines`).
+        let right = [dir[1], -dir[0]];
+        let a = bar.axis;
+        let d = if a[0] * right[0] + a[1] * right[1] < 0.0 {
+            [-a[0], -a[1]]
+        } else {
+            a
+        };
+        let p = &mut pieces[*k];
+        p.marking.outline = bar.ring.to_vec();
+        p.marking.length_m = bar.length_m;
+        p.marking.width_m = bar.width_m;
+        p.marking.heading_deg = heading_deg(d);
+        p.marking.point_count += extra;
+        for &j in joined {
+            removed[j] = true;
+        }
+    }
+    without(pieces, removed)
 }
 
 /// Smallest outline area kept (m²): far below any real marking (a 0.1 m x 0.01 m sliver).
@@ -685,6 +734,11 @@ pub fn assemble(pieces: Vec<Piece>, traj_abs: &Trajectory, params: &Params) -> (
     let refl = RefLine::new(traj_abs);
     let pieces = if params.regularize_crosswalks {
         regularise_crosswalks(pieces, &refl, params.fill_missing_stripes as usize)
+    } else {
+        pieces
+    };
+    let pieces = if params.join_stop_lines {
+        join_stop_lines(pieces, &refl)
     } else {
         pieces
     };
