@@ -57,6 +57,12 @@ pub struct Params {
     /// bridged by an inferred solid piece (confidence halved, no points); 0 turns it off.
     /// Default 4.
     pub bridge_solid_gap_m: f64,
+    /// Longer gaps, up to this (m), are bridged too when both solid pieces beside the gap
+    /// are at least as long as it: a line painted solid on both sides of a gap shorter than
+    /// either side was worn or hidden there, not broken (a real break, at a junction or
+    /// where the line turns dashed, has short or no solid pieces on one side). 0 turns it
+    /// off. Default 12.
+    pub bridge_long_gap_m: f64,
     /// Dashes of a regular dashed lane line seen only in part (worn, shadowed, sparse far
     /// scan lines) get the painted extent of the line's design: its dash length, period and
     /// width, estimated from its complete dashes (see `dashes`). Default true.
@@ -92,6 +98,7 @@ impl Default for Params {
             outline_simplify_m: 0.01,
             max_bar_width_m: 0.8,
             bridge_solid_gap_m: 4.0,
+            bridge_long_gap_m: 12.0,
             regularize_dashes: true,
             fill_missing_dashes: 1,
             widen_undersampled: true,
@@ -134,6 +141,12 @@ impl Params {
             return Err(format!(
                 "fill_missing_dashes must be in [0, 10], got {}",
                 self.fill_missing_dashes
+            ));
+        }
+        if !(self.bridge_long_gap_m >= 0.0 && self.bridge_long_gap_m <= 50.0) {
+            return Err(format!(
+                "bridge_long_gap_m must be in [0, 50], got {}",
+                self.bridge_long_gap_m
             ));
         }
         if self.fill_missing_stripes > 10 {
@@ -481,6 +494,14 @@ fn bridge(a: &Piece, b: &Piece, lane: &[[f64; 2]], max_gap: f64) -> Option<Piece
     })
 }
 
+/// The longest gap bridged between solid pieces `la` and `lb` m long: any gap up to
+/// `bridge_solid_gap_m`, and one up to `bridge_long_gap_m` no longer than either piece.
+fn bridge_limit(la: f64, lb: f64, params: &Params) -> f64 {
+    params
+        .bridge_solid_gap_m
+        .max(params.bridge_long_gap_m.min(la.min(lb)))
+}
+
 /// Station (distance along `lane` from its first vertex) of the point of `lane` nearest `p`.
 fn station_on(lane: &[[f64; 2]], p: [f64; 2]) -> f64 {
     let d = |p: [f64; 2], q: [f64; 2]| (p[0] - q[0]).hypot(p[1] - q[1]);
@@ -771,7 +792,7 @@ pub fn assemble(pieces: Vec<Piece>, traj_abs: &Trajectory, params: &Params) -> (
     }
     // Solid lane lines: short gaps between consecutive solid pieces (worn paint, a car
     // hiding the line) are bridged by a solid piece along the lane line.
-    if params.bridge_solid_gap_m > 0.0 {
+    if params.bridge_solid_gap_m > 0.0 || params.bridge_long_gap_m > 0.0 {
         let mut bridges = Vec::new();
         for l in lanes.lines.iter().filter(|l| l.class == LaneLineClass::SolidLine) {
             for w in l.pieces.windows(2) {
@@ -779,7 +800,8 @@ pub fn assemble(pieces: Vec<Piece>, traj_abs: &Trajectory, params: &Params) -> (
                 if a.marking.class != MarkingClass::SolidLine || b.marking.class != MarkingClass::SolidLine {
                     continue;
                 }
-                if let Some(bridge) = bridge(a, b, &l.line, params.bridge_solid_gap_m) {
+                let max_gap = bridge_limit(a.marking.length_m, b.marking.length_m, params);
+                if let Some(bridge) = bridge(a, b, &l.line, max_gap) {
                     bridges.push(bridge);
                 }
             }
@@ -930,5 +952,27 @@ mod tests {
         // Too long, or a mere joint: nothing.
         assert!(bridge(&solid(0.0, 10.0), &solid(15.0, 30.0), &lane, 4.0).is_none());
         assert!(bridge(&solid(0.0, 10.0), &solid(10.05, 30.0), &lane, 4.0).is_none());
+    }
+
+    #[test]
+    fn long_gaps_are_bridged_only_between_longer_solid_pieces() {
+        let p = Params::default();
+        assert_eq!(
+            bridge_limit(1.0, 50.0, &p),
+            4.0,
+            "a short piece beside: short gaps only"
+        );
+        assert_eq!(bridge_limit(9.0, 50.0, &p), 9.0);
+        assert_eq!(bridge_limit(30.0, 50.0, &p), 12.0);
+        let off = Params {
+            bridge_long_gap_m: 0.0,
+            ..Params::default()
+        };
+        assert_eq!(bridge_limit(30.0, 50.0, &off), 4.0);
+        let bad = Params {
+            bridge_long_gap_m: -1.0,
+            ..Params::default()
+        };
+        assert!(bad.validate().unwrap_err().contains("bridge_long_gap_m"));
     }
 }
