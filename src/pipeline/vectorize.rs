@@ -19,6 +19,14 @@
 //! along the driving direction (stop lines: pointing to the right of it), degrees clockwise
 //! from north. Lane lines: see `lanes` (improved line-segment self-growth of Yao 2021).
 //!
+//! `assemble`, in order: crosswalk stripes put on their crossing's design (`crosswalks`:
+//! common width and edges, worn fragments absorbed, missing stripes filled); stop lines
+//! joined with the marks on their centre line (`stoplines`); lane-line growth with
+//! crosswalks and stop lines as barriers; line pieces whose width the points do not
+//! resolve widened to their lane line's width; gaps of solid lane lines bridged (short
+//! ones always, long ones between longer pieces); dashes put on their line's design
+//! (`dashes`); ids in driving order.
+//!
 //! # Parameters
 //! See [`Params`] (and `lanes::Params` under `lane_lines`).
 //!
