@@ -74,6 +74,40 @@ impl RunStats {
     fn add(&mut self, stage: usize, t0: Instant) {
         self.stage_seconds[stage] += t0.elapsed().as_secs_f64();
     }
+
+    /// Add the counters and stage times of one chunk's marking points.
+    fn merge_chunk(&mut self, c: &ChunkMarks) {
+        self.points_processed += c.points_processed;
+        self.pavement_points += c.pavement_points;
+        self.marking_points += c.cloud.len() as u64;
+        for (a, b) in self.stage_seconds.iter_mut().zip(&c.stage_seconds) {
+            *a += b;
+        }
+    }
+}
+
+/// The marking points of one chunk's core (job-local coordinates), their mileages, and
+/// what computing them counted and took.
+struct ChunkMarks {
+    cloud: PointCloud,
+    mileage: Vec<f64>,
+    points_processed: u64,
+    /// Pavement points of the core.
+    pavement_points: u64,
+    /// Seconds of the pavement, rasterize and threshold stages (in [`STAGES`] order).
+    stage_seconds: [f64; 7],
+}
+
+impl ChunkMarks {
+    fn empty(origin: [f64; 3]) -> Self {
+        Self {
+            cloud: PointCloud::with_origin(origin),
+            mileage: Vec::new(),
+            points_processed: 0,
+            pavement_points: 0,
+            stage_seconds: [0.0; 7],
+        }
+    }
 }
 
 struct Ctx<'a> {
@@ -167,40 +201,69 @@ fn run_ctx(ctx: &mut Ctx<'_>, inputs: &Inputs) -> Result<Extraction, PipelineErr
     ctx.check()?;
 
     // Per chunk: points → marking points of the core → complete clusters → markings.
+    // Two chunks are in flight: while the clusters of chunk i are completed, classified
+    // and outlined (mostly serial work), the marking points of chunk i + 1 are computed,
+    // so the serial parts of either fill the core the other leaves idle. Results are
+    // merged in chunk order, so nothing depends on the overlap.
     let mut streaming = Streaming::default();
     let mut pieces: Vec<vectorize::Piece> = Vec::new();
     let n_chunks = plan.count();
     ctx.stats.chunks = n_chunks;
-    for (ci, k) in (plan.first..=plan.last).enumerate() {
-        let base = READ_SHARE + CHUNK_SHARE * ci as f64 / n_chunks as f64;
-        let step = CHUNK_SHARE / n_chunks as f64;
-        let t0 = Instant::now();
-        let pts = store.take(k)?;
-        ctx.stats.add(0, t0);
-        let (core_lo, core_hi) = plan.core(k);
-        let (marks, marks_m) = if pts.is_empty() {
-            (PointCloud::with_origin(origin), Vec::new())
+    let (params, progress) = (ctx.params, ctx.progress);
+    let step = CHUNK_SHARE / n_chunks as f64;
+    let base_of = |ci: usize| READ_SHARE + CHUNK_SHARE * ci as f64 / n_chunks as f64;
+    let chunk_marks = |ci: usize, pts: ChunkPoints| -> Result<ChunkMarks, PipelineError> {
+        let core = plan.core(plan.first + ci as i64);
+        if pts.is_empty() {
+            Ok(ChunkMarks::empty(origin))
         } else {
-            marking_points(ctx, &pts, origin, (core_lo, core_hi), base, step)?
-        };
-        drop(pts);
-        ctx.progress.report("cluster", base + 0.8 * step);
-        let t0 = Instant::now();
-        let last = ci + 1 == n_chunks;
-        if let Some(all) = ctx.collect.as_mut() {
-            if all.is_empty() {
-                *all = PointCloud::with_origin(origin);
-                all.gps_time = marks.gps_time.as_ref().map(|_| Vec::new());
-            }
-            all.extend_from(&marks);
+            marking_points(params, progress, &pts, origin, core, base_of(ci), step)
         }
-        let complete = streaming.feed(marks, marks_m, (!last).then_some(core_hi), cluster_groups, params);
-        ctx.stats.clusters += complete.len() as u64;
-        ctx.stats.add(4, t0);
-        ctx.check()?;
-        ctx.progress.report("classify", base + 0.9 * step);
-        pieces.extend(finish_clusters(ctx, complete, &traj, origin)?);
-        ctx.check()?;
+    };
+    let t0 = Instant::now();
+    let first_pts = store.take(plan.first)?;
+    ctx.stats.add(0, t0);
+    let mut ahead = Some(chunk_marks(0, first_pts)?);
+    for ci in 0..n_chunks {
+        let k = plan.first + ci as i64;
+        let last = ci + 1 == n_chunks;
+        let t0 = Instant::now();
+        let next_pts = if last { None } else { Some(store.take(k + 1)?) };
+        ctx.stats.add(0, t0);
+        let cur = ahead.take().expect("the marking points of every chunk are computed");
+        let (next, done) = rayon::join(
+            || next_pts.map(|pts| chunk_marks(ci + 1, pts)),
+            || -> Result<Vec<vectorize::Piece>, PipelineError> {
+                let base = base_of(ci);
+                ctx.stats.merge_chunk(&cur);
+                ctx.progress.report("cluster", base + 0.8 * step);
+                let t0 = Instant::now();
+                let (_, core_hi) = plan.core(k);
+                let ChunkMarks {
+                    cloud: marks,
+                    mileage: marks_m,
+                    ..
+                } = cur;
+                if let Some(all) = ctx.collect.as_mut() {
+                    if all.is_empty() {
+                        *all = PointCloud::with_origin(origin);
+                        all.gps_time = marks.gps_time.as_ref().map(|_| Vec::new());
+                    }
+                    all.extend_from(&marks);
+                }
+                let complete =
+                    streaming.feed(marks, marks_m, (!last).then_some(core_hi), cluster_groups, params);
+                ctx.stats.clusters += complete.len() as u64;
+                ctx.stats.add(4, t0);
+                ctx.check()?;
+                ctx.progress.report("classify", base + 0.9 * step);
+                let out = finish_clusters(ctx, complete, &traj, origin)?;
+                ctx.check()?;
+                Ok(out)
+            },
+        );
+        pieces.extend(done?);
+        ahead = next.transpose()?;
     }
 
     // Lane lines over the whole drive, class corrections, stable ids in driving order.
@@ -347,18 +410,30 @@ fn push_batch(
 }
 
 /// Pavement → rasterize → threshold for one chunk; returns the marking points of its core
-/// (job-local coordinates) and their mileages.
+/// (job-local coordinates) and their mileages. Needs no `Ctx`, so that it can run while
+/// the previous chunk's clusters are finished.
 fn marking_points(
-    ctx: &mut Ctx<'_>,
+    p: &ValidParams,
+    progress: &dyn Progress,
     c: &ChunkPoints,
     origin: [f64; 3],
     (core_lo, core_hi): (f64, f64),
     base: f64,
     step: f64,
-) -> Result<(PointCloud, Vec<f64>), PipelineError> {
-    let p = ctx.params;
-    ctx.stats.points_processed += c.len() as u64;
-    ctx.progress.report("pavement", base);
+) -> Result<ChunkMarks, PipelineError> {
+    let mut out = ChunkMarks::empty(origin);
+    let check = || {
+        if progress.is_cancelled() {
+            Err(PipelineError::Cancelled)
+        } else {
+            Ok(())
+        }
+    };
+    let add = |out: &mut ChunkMarks, stage: usize, t0: Instant| {
+        out.stage_seconds[stage] += t0.elapsed().as_secs_f64();
+    };
+    out.points_processed = c.len() as u64;
+    progress.report("pavement", base);
     let t0 = Instant::now();
     let has_time = c.gps_time.iter().all(|t| t.is_finite());
     let pav = pavement::run(
@@ -374,17 +449,17 @@ fn marking_points(
         &p.pavement,
     );
     // Pavement points of the core count once (overlaps are seen by two chunks).
-    ctx.stats.pavement_points += pav
+    out.pavement_points = pav
         .iter()
         .filter(|&&i| c.mileage[i] >= core_lo && c.mileage[i] < core_hi)
         .count() as u64;
-    ctx.stats.add(1, t0);
-    ctx.check()?;
+    add(&mut out, 1, t0);
+    check()?;
 
     let is_mark: Vec<bool> = match p.threshold.method {
         threshold::Method::None => vec![true; pav.len()],
         threshold::Method::Adaptive => {
-            ctx.progress.report("rasterize", base + 0.25 * step);
+            progress.report("rasterize", base + 0.25 * step);
             let t0 = Instant::now();
             // Columns of the pavement points, gathered in parallel (one pass each).
             let gather_f64 = |v: &[f64]| pav.par_iter().map(|&i| v[i]).collect::<Vec<f64>>();
@@ -411,9 +486,9 @@ fn marking_points(
                 &p.rasterize,
             );
             let raster = rasterize::idw(&px, py, &values, &p.rasterize);
-            ctx.stats.add(2, t0);
-            ctx.check()?;
-            ctx.progress.report("threshold", base + 0.5 * step);
+            add(&mut out, 2, t0);
+            check()?;
+            progress.report("threshold", base + 0.5 * step);
             let t0 = Instant::now();
             let seg = threshold::segment(&raster, &p.threshold);
             drop(raster);
@@ -441,8 +516,8 @@ fn marking_points(
                 &mut marks,
                 &p.pavement.verge,
             );
-            ctx.stats.add(3, t0);
-            ctx.check()?;
+            add(&mut out, 3, t0);
+            check()?;
             marks
         }
     };
@@ -452,16 +527,15 @@ fn marking_points(
         .filter(|&(&i, &m)| m && c.mileage[i] >= core_lo && c.mileage[i] < core_hi)
         .map(|(&i, _)| i)
         .collect();
-    ctx.stats.marking_points += idx.len() as u64;
-    let mut cloud = PointCloud::with_origin(origin);
+    let cloud = &mut out.cloud;
     cloud.x = idx.iter().map(|&i| c.x[i]).collect();
     cloud.y = idx.iter().map(|&i| c.y[i]).collect();
     cloud.z = idx.iter().map(|&i| c.z[i]).collect();
     cloud.intensity = idx.iter().map(|&i| c.intensity[i]).collect();
     cloud.gps_time = has_time.then(|| idx.iter().map(|&i| c.gps_time[i]).collect());
     cloud.scanner = idx.iter().map(|&i| c.scanner[i]).collect();
-    let m = idx.iter().map(|&i| c.mileage[i]).collect();
-    Ok((cloud, m))
+    out.mileage = idx.iter().map(|&i| c.mileage[i]).collect();
+    Ok(out)
 }
 
 // ---------------------------------------------------------------------------------------
