@@ -6,11 +6,14 @@
 //!    floored to whole metres). Tiles are streamed; every point is located on the
 //!    trajectory (kd-tree [`StationIndex`], in parallel) and kept when it lies within
 //!    `pavement.max_offset_m` of it, then appended to the chunks that see its mileage
-//!    ([`chunk::Store`], spilling to disk beyond `chunk.memory_budget_mb`).
-//! 2. Per chunk, in mileage order: pavement, background normalisation + IDW, adaptive
-//!    threshold, the verge check ([`pavement_verge`]), and the marking points of the
-//!    chunk's *core* (each point belongs to exactly
-//!    one core, so no point is counted twice).
+//!    ([`chunk::Store`], spilling to disk beyond `chunk.memory_budget_mb`). Decoding,
+//!    locating and appending overlap: batch b + 2 is decoded while b + 1 is located and
+//!    b appended.
+//! 2. Per chunk: pavement, background normalisation + IDW, adaptive threshold, the verge
+//!    check ([`pavement_verge`]), and the marking points of the chunk's *core* (each point
+//!    belongs to exactly one core, so no point is counted twice). Chunks are taken in
+//!    groups of `IN_FLIGHT`, computed side by side and while the previous group goes
+//!    through steps 3–4; every result is consumed in mileage order.
 //! 3. *cluster*: marking points are clustered across chunk joins by a streaming scheme:
 //!    clusters that come within `JOIN_MARGIN_M` of the next core stay open and are
 //!    re-clustered with the next chunk's points; the others are complete. Points are put in
@@ -38,6 +41,9 @@ use std::time::Instant;
 pub const JOIN_MARGIN_M: f64 = 2.5;
 /// Clusters longer than this along the trajectory are cut at its global multiples (m).
 pub const PIECE_M: f64 = 250.0;
+/// Chunks whose marking points are computed side by side (see [`run_ctx`]); each holds
+/// its points and stage buffers, so this bounds the extra memory.
+const IN_FLIGHT: usize = 2;
 
 /// Stable stage names, in pipeline order.
 pub const STAGES: [&str; 7] = [
@@ -201,10 +207,11 @@ fn run_ctx(ctx: &mut Ctx<'_>, inputs: &Inputs) -> Result<Extraction, PipelineErr
     ctx.check()?;
 
     // Per chunk: points → marking points of the core → complete clusters → markings.
-    // Two chunks are in flight: while the clusters of chunk i are completed, classified
-    // and outlined (mostly serial work), the marking points of chunk i + 1 are computed,
-    // so the serial parts of either fill the core the other leaves idle. Results are
-    // merged in chunk order, so nothing depends on the overlap.
+    // Chunks go in groups of IN_FLIGHT: while the clusters of one group are completed,
+    // classified and outlined (mostly serial work, in chunk order), the marking points of
+    // the next group's chunks are computed side by side, so the serial parts of each fill
+    // the core the others leave idle. Results are merged in chunk order, so nothing
+    // depends on the overlap.
     let mut streaming = Streaming::default();
     let mut pieces: Vec<vectorize::Piece> = Vec::new();
     let n_chunks = plan.count();
@@ -212,58 +219,76 @@ fn run_ctx(ctx: &mut Ctx<'_>, inputs: &Inputs) -> Result<Extraction, PipelineErr
     let (params, progress) = (ctx.params, ctx.progress);
     let step = CHUNK_SHARE / n_chunks as f64;
     let base_of = |ci: usize| READ_SHARE + CHUNK_SHARE * ci as f64 / n_chunks as f64;
-    let chunk_marks = |ci: usize, pts: ChunkPoints| -> Result<ChunkMarks, PipelineError> {
-        let core = plan.core(plan.first + ci as i64);
-        if pts.is_empty() {
-            Ok(ChunkMarks::empty(origin))
-        } else {
-            marking_points(params, progress, &pts, origin, core, base_of(ci), step)
-        }
-    };
-    let t0 = Instant::now();
-    let first_pts = store.take(plan.first)?;
-    ctx.stats.add(0, t0);
-    let mut ahead = Some(chunk_marks(0, first_pts)?);
-    for ci in 0..n_chunks {
-        let k = plan.first + ci as i64;
-        let last = ci + 1 == n_chunks;
-        let t0 = Instant::now();
-        let next_pts = if last { None } else { Some(store.take(k + 1)?) };
-        ctx.stats.add(0, t0);
-        let cur = ahead.take().expect("the marking points of every chunk are computed");
-        let (next, done) = rayon::join(
-            || next_pts.map(|pts| chunk_marks(ci + 1, pts)),
-            || -> Result<Vec<vectorize::Piece>, PipelineError> {
-                let base = base_of(ci);
-                ctx.stats.merge_chunk(&cur);
-                ctx.progress.report("cluster", base + 0.8 * step);
-                let t0 = Instant::now();
-                let (_, core_hi) = plan.core(k);
-                let ChunkMarks {
-                    cloud: marks,
-                    mileage: marks_m,
-                    ..
-                } = cur;
-                if let Some(all) = ctx.collect.as_mut() {
-                    if all.is_empty() {
-                        *all = PointCloud::with_origin(origin);
-                        all.gps_time = marks.gps_time.as_ref().map(|_| Vec::new());
-                    }
-                    all.extend_from(&marks);
+    // Marking points of chunks lo..hi (indices from the plan's first), side by side.
+    let group_marks = |lo: usize, group: Vec<ChunkPoints>| -> Result<Vec<ChunkMarks>, PipelineError> {
+        group
+            .into_par_iter()
+            .enumerate()
+            .map(|(j, pts)| {
+                let ci = lo + j;
+                if pts.is_empty() {
+                    return Ok(ChunkMarks::empty(origin));
                 }
-                let complete =
-                    streaming.feed(marks, marks_m, (!last).then_some(core_hi), cluster_groups, params);
-                ctx.stats.clusters += complete.len() as u64;
-                ctx.stats.add(4, t0);
-                ctx.check()?;
-                ctx.progress.report("classify", base + 0.9 * step);
-                let out = finish_clusters(ctx, complete, &traj, origin)?;
-                ctx.check()?;
+                let core = plan.core(plan.first + ci as i64);
+                marking_points(params, progress, &pts, origin, core, base_of(ci), step)
+            })
+            .collect()
+    };
+    let mut take_group = |lo: usize, hi: usize, stats: &mut RunStats| -> Result<Vec<ChunkPoints>, PipelineError> {
+        let t0 = Instant::now();
+        let group = (lo..hi)
+            .map(|ci| store.take(plan.first + ci as i64))
+            .collect::<Result<Vec<_>, _>>();
+        stats.add(0, t0);
+        group
+    };
+    let first = take_group(0, IN_FLIGHT.min(n_chunks), &mut ctx.stats)?;
+    let mut ready = group_marks(0, first)?;
+    let mut lo = 0;
+    while lo < n_chunks {
+        let hi = (lo + IN_FLIGHT).min(n_chunks);
+        let next_hi = (hi + IN_FLIGHT).min(n_chunks);
+        let next_pts = take_group(hi, next_hi, &mut ctx.stats)?;
+        let cur = std::mem::take(&mut ready);
+        let (next, done) = rayon::join(
+            || group_marks(hi, next_pts),
+            || -> Result<Vec<vectorize::Piece>, PipelineError> {
+                let mut out = Vec::new();
+                for (j, cm) in cur.into_iter().enumerate() {
+                    let ci = lo + j;
+                    let base = base_of(ci);
+                    ctx.stats.merge_chunk(&cm);
+                    ctx.progress.report("cluster", base + 0.8 * step);
+                    let t0 = Instant::now();
+                    let last = ci + 1 == n_chunks;
+                    let (_, core_hi) = plan.core(plan.first + ci as i64);
+                    let ChunkMarks {
+                        cloud: marks,
+                        mileage: marks_m,
+                        ..
+                    } = cm;
+                    if let Some(all) = ctx.collect.as_mut() {
+                        if all.is_empty() {
+                            *all = PointCloud::with_origin(origin);
+                            all.gps_time = marks.gps_time.as_ref().map(|_| Vec::new());
+                        }
+                        all.extend_from(&marks);
+                    }
+                    let complete =
+                        streaming.feed(marks, marks_m, (!last).then_some(core_hi), cluster_groups, params);
+                    ctx.stats.clusters += complete.len() as u64;
+                    ctx.stats.add(4, t0);
+                    ctx.check()?;
+                    ctx.progress.report("classify", base + 0.9 * step);
+                    out.extend(finish_clusters(ctx, complete, &traj, origin)?);
+                    ctx.check()?;
+                }
                 Ok(out)
             },
         );
         pieces.extend(done?);
-        ahead = next.transpose()?;
+        ready = next?;
+        lo = hi;
     }
 
     // Lane lines over the whole drive, class corrections, stable ids in driving order.
@@ -282,9 +307,10 @@ fn run_ctx(ctx: &mut Ctx<'_>, inputs: &Inputs) -> Result<Extraction, PipelineErr
 
 /// Stream every tile into the chunk store; returns the CRS of the first tile that has one.
 ///
-/// A reader thread decodes the next batch while this one is located (in parallel blocks,
-/// each walking from point to point along the trajectory, see
-/// [`StationIndex::locate_near`]) and appended to the chunks.
+/// This thread decodes the next batch while a worker locates the one before (in parallel
+/// blocks, each walking from point to point along the trajectory, see
+/// [`StationIndex::locate_near`]) and, at the same time, appends the one before that to
+/// the chunks.
 fn read_into(
     ctx: &mut Ctx<'_>,
     inputs: &Inputs,
@@ -311,25 +337,47 @@ fn read_into(
             crs = reader.crs().cloned();
         }
         let chunk = reader.preferred_chunk().max(1 << 18);
-        // This thread decodes; a worker locates and stores the previous batch meanwhile.
+        // This thread decodes; a worker locates one batch while it stores the one before
+        // (rayon::join: appending to the chunks is serial, locating is parallel).
         // Buffers go round between the two through a pair of channels.
         let (full_tx, full_rx) = std::sync::mpsc::sync_channel::<PointCloud>(1);
-        let (empty_tx, empty_rx) = std::sync::mpsc::sync_channel::<PointCloud>(3);
-        for _ in 0..3 {
+        let (empty_tx, empty_rx) = std::sync::mpsc::sync_channel::<PointCloud>(BATCHES);
+        for _ in 0..BATCHES {
             empty_tx.send(PointCloud::default()).expect("receiver alive");
         }
         let index = &index;
         let (res, near) = std::thread::scope(|sc| {
             let store = &mut *store;
             let worker = sc.spawn(move || -> Result<u64, PipelineError> {
-                let mut stations = (Vec::new(), Vec::new());
+                let keep = |m: f64, o: f64| o.abs() <= max_off && m >= m_lo && m <= m_hi;
                 let mut near = 0;
+                // The located batch waiting to be stored, and a spare pair of station columns.
+                let mut located: Option<(PointCloud, Stations)> = None;
+                let mut spare = Stations::default();
                 for batch in full_rx.iter() {
-                    near += push_batch(&batch, index, (m_lo, m_hi), max_off, store, &mut stations);
-                    store.maybe_spill()?;
-                    if empty_tx.send(batch).is_err() {
-                        break;
+                    let mut st = std::mem::take(&mut spare);
+                    let (_, stored) = rayon::join(
+                        || locate_batch(&batch, index, &mut st),
+                        || {
+                            located.take().map(|(b, s)| {
+                                let n = store.push_cloud(&b, &s.mileage, &s.offset, keep);
+                                (b, s, n, store.maybe_spill())
+                            })
+                        },
+                    );
+                    located = Some((batch, st));
+                    if let Some((b, s, n, spilled)) = stored {
+                        near += n;
+                        spilled?;
+                        spare = s;
+                        if empty_tx.send(b).is_err() {
+                            return Ok(near);
+                        }
                     }
+                }
+                if let Some((b, s)) = located {
+                    near += store.push_cloud(&b, &s.mileage, &s.offset, keep);
+                    store.maybe_spill()?;
                 }
                 Ok(near)
             });
@@ -379,22 +427,25 @@ fn read_into(
 
 /// Points per block located by one walk (the first point of a block asks the kd-tree).
 const LOCATE_BLOCK: usize = 8192;
+/// Point buffers going round between the reading thread and the locating worker: one
+/// being decoded, one waiting, one being located, one being stored.
+const BATCHES: usize = 4;
 
-/// Locate a batch on the trajectory (parallel blocks) and append the points near it.
-fn push_batch(
-    cloud: &PointCloud,
-    index: &StationIndex<'_>,
-    (m_lo, m_hi): (f64, f64),
-    max_off: f64,
-    store: &mut Store,
-    (mileage, offset): &mut (Vec<f64>, Vec<f64>),
-) -> u64 {
+/// Mileage and offset of every point of a batch.
+#[derive(Default)]
+struct Stations {
+    mileage: Vec<f64>,
+    offset: Vec<f64>,
+}
+
+/// Locate a batch on the trajectory (parallel blocks, each walking from point to point).
+fn locate_batch(cloud: &PointCloud, index: &StationIndex<'_>, st: &mut Stations) {
     let n = cloud.len();
-    mileage.resize(n, 0.0);
-    offset.resize(n, 0.0);
-    mileage
+    st.mileage.resize(n, 0.0);
+    st.offset.resize(n, 0.0);
+    st.mileage
         .par_chunks_mut(LOCATE_BLOCK)
-        .zip(offset.par_chunks_mut(LOCATE_BLOCK))
+        .zip(st.offset.par_chunks_mut(LOCATE_BLOCK))
         .enumerate()
         .for_each(|(b, (ms, os))| {
             let base = b * LOCATE_BLOCK;
@@ -404,9 +455,6 @@ fn push_batch(
                 (*m, *o) = (s.mileage_m, s.offset_m);
             }
         });
-    store.push_cloud(cloud, &mileage[..n], &offset[..n], |m, o| {
-        o.abs() <= max_off && m >= m_lo && m <= m_hi
-    })
 }
 
 /// Pavement → rasterize → threshold for one chunk; returns the marking points of its core
