@@ -234,14 +234,15 @@ fn run_ctx(ctx: &mut Ctx<'_>, inputs: &Inputs) -> Result<Extraction, PipelineErr
             })
             .collect()
     };
-    let mut take_group = |lo: usize, hi: usize, stats: &mut RunStats| -> Result<Vec<ChunkPoints>, PipelineError> {
-        let t0 = Instant::now();
-        let group = (lo..hi)
-            .map(|ci| store.take(plan.first + ci as i64))
-            .collect::<Result<Vec<_>, _>>();
-        stats.add(0, t0);
-        group
-    };
+    let mut take_group =
+        |lo: usize, hi: usize, stats: &mut RunStats| -> Result<Vec<ChunkPoints>, PipelineError> {
+            let t0 = Instant::now();
+            let group = (lo..hi)
+                .map(|ci| store.take(plan.first + ci as i64))
+                .collect::<Result<Vec<_>, _>>();
+            stats.add(0, t0);
+            group
+        };
     let first = take_group(0, IN_FLIGHT.min(n_chunks), &mut ctx.stats)?;
     let mut ready = group_marks(0, first)?;
     let mut lo = 0;
