@@ -71,7 +71,9 @@ pub struct RunStats {
     pub clusters: u64,
     pub chunks: usize,
     pub spilled_points: u64,
-    /// Wall-clock seconds per stage, in [`STAGES`] order.
+    /// Wall-clock seconds per stage, in [`STAGES`] order. Neighbouring chunks are
+    /// processed at the same time (module docs, step 2), so the stages' sum can exceed
+    /// `total_seconds`.
     pub stage_seconds: [f64; 7],
     pub total_seconds: f64,
 }
