@@ -6,11 +6,14 @@
 //!    floored to whole metres). Tiles are streamed; every point is located on the
 //!    trajectory (kd-tree [`StationIndex`], in parallel) and kept when it lies within
 //!    `pavement.max_offset_m` of it, then appended to the chunks that see its mileage
-//!    ([`chunk::Store`], spilling to disk beyond `chunk.memory_budget_mb`).
-//! 2. Per chunk, in mileage order: pavement, background normalisation + IDW, adaptive
-//!    threshold, the verge check ([`pavement_verge`]), and the marking points of the
-//!    chunk's *core* (each point belongs to exactly
-//!    one core, so no point is counted twice).
+//!    ([`chunk::Store`], spilling to disk beyond `chunk.memory_budget_mb`). Decoding,
+//!    locating and appending overlap: batch b + 2 is decoded while b + 1 is located and
+//!    b appended.
+//! 2. Per chunk: pavement, background normalisation + IDW, adaptive threshold, the verge
+//!    check ([`pavement_verge`]), and the marking points of the chunk's *core* (each point
+//!    belongs to exactly one core, so no point is counted twice). Chunks are taken in
+//!    groups of `IN_FLIGHT`, computed side by side and while the previous group goes
+//!    through steps 3–4; every result is consumed in mileage order.
 //! 3. *cluster*: marking points are clustered across chunk joins by a streaming scheme:
 //!    clusters that come within `JOIN_MARGIN_M` of the next core stay open and are
 //!    re-clustered with the next chunk's points; the others are complete. Points are put in
@@ -38,6 +41,9 @@ use std::time::Instant;
 pub const JOIN_MARGIN_M: f64 = 2.5;
 /// Clusters longer than this along the trajectory are cut at its global multiples (m).
 pub const PIECE_M: f64 = 250.0;
+/// Chunks whose marking points are computed side by side (see [`run_ctx`]); each holds
+/// its points and stage buffers, so this bounds the extra memory.
+const IN_FLIGHT: usize = 2;
 
 /// Stable stage names, in pipeline order.
 pub const STAGES: [&str; 7] = [
@@ -65,7 +71,9 @@ pub struct RunStats {
     pub clusters: u64,
     pub chunks: usize,
     pub spilled_points: u64,
-    /// Wall-clock seconds per stage, in [`STAGES`] order.
+    /// Wall-clock seconds per stage, in [`STAGES`] order. Neighbouring chunks are
+    /// processed at the same time (module docs, step 2), so the stages' sum can exceed
+    /// `total_seconds`.
     pub stage_seconds: [f64; 7],
     pub total_seconds: f64,
 }
@@ -73,6 +81,40 @@ pub struct RunStats {
 impl RunStats {
     fn add(&mut self, stage: usize, t0: Instant) {
         self.stage_seconds[stage] += t0.elapsed().as_secs_f64();
+    }
+
+    /// Add the counters and stage times of one chunk's marking points.
+    fn merge_chunk(&mut self, c: &ChunkMarks) {
+        self.points_processed += c.points_processed;
+        self.pavement_points += c.pavement_points;
+        self.marking_points += c.cloud.len() as u64;
+        for (a, b) in self.stage_seconds.iter_mut().zip(&c.stage_seconds) {
+            *a += b;
+        }
+    }
+}
+
+/// The marking points of one chunk's core (job-local coordinates), their mileages, and
+/// what computing them counted and took.
+struct ChunkMarks {
+    cloud: PointCloud,
+    mileage: Vec<f64>,
+    points_processed: u64,
+    /// Pavement points of the core.
+    pavement_points: u64,
+    /// Seconds of the pavement, rasterize and threshold stages (in [`STAGES`] order).
+    stage_seconds: [f64; 7],
+}
+
+impl ChunkMarks {
+    fn empty(origin: [f64; 3]) -> Self {
+        Self {
+            cloud: PointCloud::with_origin(origin),
+            mileage: Vec::new(),
+            points_processed: 0,
+            pavement_points: 0,
+            stage_seconds: [0.0; 7],
+        }
     }
 }
 
@@ -167,40 +209,89 @@ fn run_ctx(ctx: &mut Ctx<'_>, inputs: &Inputs) -> Result<Extraction, PipelineErr
     ctx.check()?;
 
     // Per chunk: points → marking points of the core → complete clusters → markings.
+    // Chunks go in groups of IN_FLIGHT: while the clusters of one group are completed,
+    // classified and outlined (mostly serial work, in chunk order), the marking points of
+    // the next group's chunks are computed side by side, so the serial parts of each fill
+    // the core the others leave idle. Results are merged in chunk order, so nothing
+    // depends on the overlap.
     let mut streaming = Streaming::default();
     let mut pieces: Vec<vectorize::Piece> = Vec::new();
     let n_chunks = plan.count();
     ctx.stats.chunks = n_chunks;
-    for (ci, k) in (plan.first..=plan.last).enumerate() {
-        let base = READ_SHARE + CHUNK_SHARE * ci as f64 / n_chunks as f64;
-        let step = CHUNK_SHARE / n_chunks as f64;
-        let t0 = Instant::now();
-        let pts = store.take(k)?;
-        ctx.stats.add(0, t0);
-        let (core_lo, core_hi) = plan.core(k);
-        let (marks, marks_m) = if pts.is_empty() {
-            (PointCloud::with_origin(origin), Vec::new())
-        } else {
-            marking_points(ctx, &pts, origin, (core_lo, core_hi), base, step)?
+    let (params, progress) = (ctx.params, ctx.progress);
+    let step = CHUNK_SHARE / n_chunks as f64;
+    let base_of = |ci: usize| READ_SHARE + CHUNK_SHARE * ci as f64 / n_chunks as f64;
+    // Marking points of chunks lo..hi (indices from the plan's first), side by side.
+    let group_marks = |lo: usize, group: Vec<ChunkPoints>| -> Result<Vec<ChunkMarks>, PipelineError> {
+        group
+            .into_par_iter()
+            .enumerate()
+            .map(|(j, pts)| {
+                let ci = lo + j;
+                if pts.is_empty() {
+                    return Ok(ChunkMarks::empty(origin));
+                }
+                let core = plan.core(plan.first + ci as i64);
+                marking_points(params, progress, &pts, origin, core, base_of(ci), step)
+            })
+            .collect()
+    };
+    let mut take_group =
+        |lo: usize, hi: usize, stats: &mut RunStats| -> Result<Vec<ChunkPoints>, PipelineError> {
+            let t0 = Instant::now();
+            let group = (lo..hi)
+                .map(|ci| store.take(plan.first + ci as i64))
+                .collect::<Result<Vec<_>, _>>();
+            stats.add(0, t0);
+            group
         };
-        drop(pts);
-        ctx.progress.report("cluster", base + 0.8 * step);
-        let t0 = Instant::now();
-        let last = ci + 1 == n_chunks;
-        if let Some(all) = ctx.collect.as_mut() {
-            if all.is_empty() {
-                *all = PointCloud::with_origin(origin);
-                all.gps_time = marks.gps_time.as_ref().map(|_| Vec::new());
-            }
-            all.extend_from(&marks);
-        }
-        let complete = streaming.feed(marks, marks_m, (!last).then_some(core_hi), cluster_groups, params);
-        ctx.stats.clusters += complete.len() as u64;
-        ctx.stats.add(4, t0);
-        ctx.check()?;
-        ctx.progress.report("classify", base + 0.9 * step);
-        pieces.extend(finish_clusters(ctx, complete, &traj, origin)?);
-        ctx.check()?;
+    let first = take_group(0, IN_FLIGHT.min(n_chunks), &mut ctx.stats)?;
+    let mut ready = group_marks(0, first)?;
+    let mut lo = 0;
+    while lo < n_chunks {
+        let hi = (lo + IN_FLIGHT).min(n_chunks);
+        let next_hi = (hi + IN_FLIGHT).min(n_chunks);
+        let next_pts = take_group(hi, next_hi, &mut ctx.stats)?;
+        let cur = std::mem::take(&mut ready);
+        let (next, done) = rayon::join(
+            || group_marks(hi, next_pts),
+            || -> Result<Vec<vectorize::Piece>, PipelineError> {
+                let mut out = Vec::new();
+                for (j, cm) in cur.into_iter().enumerate() {
+                    let ci = lo + j;
+                    let base = base_of(ci);
+                    ctx.stats.merge_chunk(&cm);
+                    ctx.progress.report("cluster", base + 0.8 * step);
+                    let t0 = Instant::now();
+                    let last = ci + 1 == n_chunks;
+                    let (_, core_hi) = plan.core(plan.first + ci as i64);
+                    let ChunkMarks {
+                        cloud: marks,
+                        mileage: marks_m,
+                        ..
+                    } = cm;
+                    if let Some(all) = ctx.collect.as_mut() {
+                        if all.is_empty() {
+                            *all = PointCloud::with_origin(origin);
+                            all.gps_time = marks.gps_time.as_ref().map(|_| Vec::new());
+                        }
+                        all.extend_from(&marks);
+                    }
+                    let complete =
+                        streaming.feed(marks, marks_m, (!last).then_some(core_hi), cluster_groups, params);
+                    ctx.stats.clusters += complete.len() as u64;
+                    ctx.stats.add(4, t0);
+                    ctx.check()?;
+                    ctx.progress.report("classify", base + 0.9 * step);
+                    out.extend(finish_clusters(ctx, complete, &traj, origin)?);
+                    ctx.check()?;
+                }
+                Ok(out)
+            },
+        );
+        pieces.extend(done?);
+        ready = next?;
+        lo = hi;
     }
 
     // Lane lines over the whole drive, class corrections, stable ids in driving order.
@@ -219,9 +310,10 @@ fn run_ctx(ctx: &mut Ctx<'_>, inputs: &Inputs) -> Result<Extraction, PipelineErr
 
 /// Stream every tile into the chunk store; returns the CRS of the first tile that has one.
 ///
-/// A reader thread decodes the next batch while this one is located (in parallel blocks,
-/// each walking from point to point along the trajectory, see
-/// [`StationIndex::locate_near`]) and appended to the chunks.
+/// This thread decodes the next batch while a worker locates the one before (in parallel
+/// blocks, each walking from point to point along the trajectory, see
+/// [`StationIndex::locate_near`]) and, at the same time, appends the one before that to
+/// the chunks.
 fn read_into(
     ctx: &mut Ctx<'_>,
     inputs: &Inputs,
@@ -248,25 +340,47 @@ fn read_into(
             crs = reader.crs().cloned();
         }
         let chunk = reader.preferred_chunk().max(1 << 18);
-        // This thread decodes; a worker locates and stores the previous batch meanwhile.
+        // This thread decodes; a worker locates one batch while it stores the one before
+        // (rayon::join: appending to the chunks is serial, locating is parallel).
         // Buffers go round between the two through a pair of channels.
         let (full_tx, full_rx) = std::sync::mpsc::sync_channel::<PointCloud>(1);
-        let (empty_tx, empty_rx) = std::sync::mpsc::sync_channel::<PointCloud>(3);
-        for _ in 0..3 {
+        let (empty_tx, empty_rx) = std::sync::mpsc::sync_channel::<PointCloud>(BATCHES);
+        for _ in 0..BATCHES {
             empty_tx.send(PointCloud::default()).expect("receiver alive");
         }
         let index = &index;
         let (res, near) = std::thread::scope(|sc| {
             let store = &mut *store;
             let worker = sc.spawn(move || -> Result<u64, PipelineError> {
-                let mut stations = (Vec::new(), Vec::new());
+                let keep = |m: f64, o: f64| o.abs() <= max_off && m >= m_lo && m <= m_hi;
                 let mut near = 0;
+                // The located batch waiting to be stored, and a spare pair of station columns.
+                let mut located: Option<(PointCloud, Stations)> = None;
+                let mut spare = Stations::default();
                 for batch in full_rx.iter() {
-                    near += push_batch(&batch, index, (m_lo, m_hi), max_off, store, &mut stations);
-                    store.maybe_spill()?;
-                    if empty_tx.send(batch).is_err() {
-                        break;
+                    let mut st = std::mem::take(&mut spare);
+                    let (_, stored) = rayon::join(
+                        || locate_batch(&batch, index, &mut st),
+                        || {
+                            located.take().map(|(b, s)| {
+                                let n = store.push_cloud(&b, &s.mileage, &s.offset, keep);
+                                (b, s, n, store.maybe_spill())
+                            })
+                        },
+                    );
+                    located = Some((batch, st));
+                    if let Some((b, s, n, spilled)) = stored {
+                        near += n;
+                        spilled?;
+                        spare = s;
+                        if empty_tx.send(b).is_err() {
+                            return Ok(near);
+                        }
                     }
+                }
+                if let Some((b, s)) = located {
+                    near += store.push_cloud(&b, &s.mileage, &s.offset, keep);
+                    store.maybe_spill()?;
                 }
                 Ok(near)
             });
@@ -316,22 +430,25 @@ fn read_into(
 
 /// Points per block located by one walk (the first point of a block asks the kd-tree).
 const LOCATE_BLOCK: usize = 8192;
+/// Point buffers going round between the reading thread and the locating worker: one
+/// being decoded, one waiting, one being located, one being stored.
+const BATCHES: usize = 4;
 
-/// Locate a batch on the trajectory (parallel blocks) and append the points near it.
-fn push_batch(
-    cloud: &PointCloud,
-    index: &StationIndex<'_>,
-    (m_lo, m_hi): (f64, f64),
-    max_off: f64,
-    store: &mut Store,
-    (mileage, offset): &mut (Vec<f64>, Vec<f64>),
-) -> u64 {
+/// Mileage and offset of every point of a batch.
+#[derive(Default)]
+struct Stations {
+    mileage: Vec<f64>,
+    offset: Vec<f64>,
+}
+
+/// Locate a batch on the trajectory (parallel blocks, each walking from point to point).
+fn locate_batch(cloud: &PointCloud, index: &StationIndex<'_>, st: &mut Stations) {
     let n = cloud.len();
-    mileage.resize(n, 0.0);
-    offset.resize(n, 0.0);
-    mileage
+    st.mileage.resize(n, 0.0);
+    st.offset.resize(n, 0.0);
+    st.mileage
         .par_chunks_mut(LOCATE_BLOCK)
-        .zip(offset.par_chunks_mut(LOCATE_BLOCK))
+        .zip(st.offset.par_chunks_mut(LOCATE_BLOCK))
         .enumerate()
         .for_each(|(b, (ms, os))| {
             let base = b * LOCATE_BLOCK;
@@ -341,24 +458,33 @@ fn push_batch(
                 (*m, *o) = (s.mileage_m, s.offset_m);
             }
         });
-    store.push_cloud(cloud, &mileage[..n], &offset[..n], |m, o| {
-        o.abs() <= max_off && m >= m_lo && m <= m_hi
-    })
 }
 
 /// Pavement → rasterize → threshold for one chunk; returns the marking points of its core
-/// (job-local coordinates) and their mileages.
+/// (job-local coordinates) and their mileages. Needs no `Ctx`, so that it can run while
+/// the previous chunk's clusters are finished.
 fn marking_points(
-    ctx: &mut Ctx<'_>,
+    p: &ValidParams,
+    progress: &dyn Progress,
     c: &ChunkPoints,
     origin: [f64; 3],
     (core_lo, core_hi): (f64, f64),
     base: f64,
     step: f64,
-) -> Result<(PointCloud, Vec<f64>), PipelineError> {
-    let p = ctx.params;
-    ctx.stats.points_processed += c.len() as u64;
-    ctx.progress.report("pavement", base);
+) -> Result<ChunkMarks, PipelineError> {
+    let mut out = ChunkMarks::empty(origin);
+    let check = || {
+        if progress.is_cancelled() {
+            Err(PipelineError::Cancelled)
+        } else {
+            Ok(())
+        }
+    };
+    let add = |out: &mut ChunkMarks, stage: usize, t0: Instant| {
+        out.stage_seconds[stage] += t0.elapsed().as_secs_f64();
+    };
+    out.points_processed = c.len() as u64;
+    progress.report("pavement", base);
     let t0 = Instant::now();
     let has_time = c.gps_time.iter().all(|t| t.is_finite());
     let pav = pavement::run(
@@ -374,17 +500,17 @@ fn marking_points(
         &p.pavement,
     );
     // Pavement points of the core count once (overlaps are seen by two chunks).
-    ctx.stats.pavement_points += pav
+    out.pavement_points = pav
         .iter()
         .filter(|&&i| c.mileage[i] >= core_lo && c.mileage[i] < core_hi)
         .count() as u64;
-    ctx.stats.add(1, t0);
-    ctx.check()?;
+    add(&mut out, 1, t0);
+    check()?;
 
     let is_mark: Vec<bool> = match p.threshold.method {
         threshold::Method::None => vec![true; pav.len()],
         threshold::Method::Adaptive => {
-            ctx.progress.report("rasterize", base + 0.25 * step);
+            progress.report("rasterize", base + 0.25 * step);
             let t0 = Instant::now();
             // Columns of the pavement points, gathered in parallel (one pass each).
             let gather_f64 = |v: &[f64]| pav.par_iter().map(|&i| v[i]).collect::<Vec<f64>>();
@@ -411,9 +537,9 @@ fn marking_points(
                 &p.rasterize,
             );
             let raster = rasterize::idw(&px, py, &values, &p.rasterize);
-            ctx.stats.add(2, t0);
-            ctx.check()?;
-            ctx.progress.report("threshold", base + 0.5 * step);
+            add(&mut out, 2, t0);
+            check()?;
+            progress.report("threshold", base + 0.5 * step);
             let t0 = Instant::now();
             let seg = threshold::segment(&raster, &p.threshold);
             drop(raster);
@@ -441,8 +567,8 @@ fn marking_points(
                 &mut marks,
                 &p.pavement.verge,
             );
-            ctx.stats.add(3, t0);
-            ctx.check()?;
+            add(&mut out, 3, t0);
+            check()?;
             marks
         }
     };
@@ -452,16 +578,15 @@ fn marking_points(
         .filter(|&(&i, &m)| m && c.mileage[i] >= core_lo && c.mileage[i] < core_hi)
         .map(|(&i, _)| i)
         .collect();
-    ctx.stats.marking_points += idx.len() as u64;
-    let mut cloud = PointCloud::with_origin(origin);
+    let cloud = &mut out.cloud;
     cloud.x = idx.iter().map(|&i| c.x[i]).collect();
     cloud.y = idx.iter().map(|&i| c.y[i]).collect();
     cloud.z = idx.iter().map(|&i| c.z[i]).collect();
     cloud.intensity = idx.iter().map(|&i| c.intensity[i]).collect();
     cloud.gps_time = has_time.then(|| idx.iter().map(|&i| c.gps_time[i]).collect());
     cloud.scanner = idx.iter().map(|&i| c.scanner[i]).collect();
-    let m = idx.iter().map(|&i| c.mileage[i]).collect();
-    Ok((cloud, m))
+    out.mileage = idx.iter().map(|&i| c.mileage[i]).collect();
+    Ok(out)
 }
 
 // ---------------------------------------------------------------------------------------

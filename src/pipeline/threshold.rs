@@ -46,7 +46,9 @@
 //! J. Graphics Tools 12(2); Yao et al. (2019, 2021); Pan et al. (2019) ISPRS J.
 //!
 //! **Complexity.** O(pixels) for smoothing (separable), integral image, threshold,
-//! morphology (running windows) and labelling; O(points) to map points back.
+//! morphology (running windows) and labelling; O(points) to map points back. Smoothing,
+//! integral images, thresholds and the point passes run in parallel; with hysteresis the
+//! weak mask is built and labelled beside the strong one.
 
 use super::rasterize::Raster;
 use rayon::prelude::*;
@@ -550,14 +552,23 @@ pub fn segment(img: &Raster<f32>, p: &Params) -> Segmentation {
         }
         m
     };
-    let strong = detect(p.factor, p.min_contrast);
-    let mut mask = if p.weak_factor < p.factor || p.weak_min_contrast < p.min_contrast {
+    let hysteresis = p.weak_factor < p.factor || p.weak_min_contrast < p.min_contrast;
+    // The weak mask and its (serial) labelling run beside the strong mask.
+    let (strong, weak) = rayon::join(
+        || detect(p.factor, p.min_contrast),
+        || {
+            hysteresis.then(|| {
+                let weak = detect(
+                    p.weak_factor.min(p.factor),
+                    p.weak_min_contrast.min(p.min_contrast),
+                );
+                let labelled = label(&weak);
+                (weak, labelled)
+            })
+        },
+    );
+    let mut mask = if let Some((weak, (wl, wc))) = weak {
         // Hysteresis: weak pixels count only in components that hold a strong one.
-        let weak = detect(
-            p.weak_factor.min(p.factor),
-            p.weak_min_contrast.min(p.min_contrast),
-        );
-        let (wl, wc) = label(&weak);
         let mut seeded = vec![false; wc.len() + 1];
         for (l, s) in wl.iter().zip(&strong.data) {
             if *s != 0 {
@@ -649,19 +660,28 @@ pub fn points_from_mask(seg: &Segmentation, xs: &[f64], ys: &[f64], values: &[f3
 /// `flat_min_spread_m`. Inputs are the pavement points' mileage, offset and height and the
 /// marking decision to refine; returns how many points were cleared.
 ///
-/// Hand-written: a dense min/max grid over the chunk's bounding box, O(points + cells).
+/// Hand-written: a dense min/max grid over the chunk's bounding box, O(points + cells);
+/// filled in up to [`FLAT_PARTS`] parallel parts (merged cell-wise) when the grid is small
+/// next to the point count.
 pub fn clear_unflat(m: &[f64], o: &[f64], z: &[f64], is_mark: &mut [bool], p: &Params) -> usize {
     if p.flat_noise_factor <= 0.0 || m.is_empty() || !is_mark.iter().any(|&b| b) {
         return 0;
     }
+    // Min / max / count reductions do not depend on the order, so the parallel passes
+    // give exactly the serial result.
     let bound = |v: &[f64]| {
-        v.iter()
+        v.par_iter()
             .filter(|x| x.is_finite())
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
-                (a.min(x), b.max(x))
-            })
+            .fold(
+                || (f64::INFINITY, f64::NEG_INFINITY),
+                |(a, b), &x| (a.min(x), b.max(x)),
+            )
+            .reduce(
+                || (f64::INFINITY, f64::NEG_INFINITY),
+                |(a, b), (c, d)| (a.min(c), b.max(d)),
+            )
     };
-    let ((m0, m1), (o0, o1)) = (bound(m), bound(o));
+    let ((m0, m1), (o0, o1)) = rayon::join(|| bound(m), || bound(o));
     if !(m0.is_finite() && o0.is_finite()) {
         return 0;
     }
@@ -680,20 +700,45 @@ pub fn clear_unflat(m: &[f64], o: &[f64], z: &[f64], is_mark: &mut [bool], p: &P
         let r = (((o[i] - o0) / cell) as usize).min(nr - 1);
         Some(r * nc + c)
     };
-    let mut lo = vec![f32::INFINITY; nc * nr];
-    let mut hi = vec![f32::NEG_INFINITY; nc * nr];
-    let mut count = vec![0u32; nc * nr];
-    for (i, &zi) in z.iter().enumerate().take(m.len()) {
-        if let Some(k) = idx(i) {
-            let v = zi as f32;
-            lo[k] = lo[k].min(v);
-            hi[k] = hi[k].max(v);
-            count[k] += 1;
+    // Height range and count per cell: one grid per part of the points (at most
+    // FLAT_PARTS, and only when the grid is small next to the points), merged cell-wise.
+    let cells = nc * nr;
+    let n = m.len().min(z.len());
+    let parts = if cells * 4 <= n { FLAT_PARTS } else { 1 };
+    let fill = |range: std::ops::Range<usize>| {
+        let mut lo = vec![f32::INFINITY; cells];
+        let mut hi = vec![f32::NEG_INFINITY; cells];
+        let mut count = vec![0u32; cells];
+        for i in range {
+            if let Some(k) = idx(i) {
+                let v = z[i] as f32;
+                lo[k] = lo[k].min(v);
+                hi[k] = hi[k].max(v);
+                count[k] += 1;
+            }
         }
-    }
+        (lo, hi, count)
+    };
+    let part = n.div_ceil(parts).max(1);
+    let (lo, hi, count) = (0..parts)
+        .into_par_iter()
+        .map(|k| fill(k * part..((k + 1) * part).min(n)))
+        .reduce_with(|mut a, b| {
+            for k in 0..cells {
+                a.0[k] = a.0[k].min(b.0[k]);
+                a.1[k] = a.1[k].max(b.1[k]);
+                a.2[k] += b.2[k];
+            }
+            a
+        })
+        .expect("at least one part");
     let spread = |k: usize| if count[k] >= 3 { hi[k] - lo[k] } else { 0.0 };
-    let mut mark_cells: Vec<usize> = (0..m.len()).filter(|&i| is_mark[i]).filter_map(idx).collect();
-    mark_cells.sort_unstable();
+    let mut mark_cells: Vec<usize> = (0..m.len())
+        .into_par_iter()
+        .filter(|&i| is_mark[i])
+        .filter_map(idx)
+        .collect();
+    mark_cells.par_sort_unstable();
     mark_cells.dedup();
     let mut spreads: Vec<f32> = mark_cells
         .iter()
@@ -706,15 +751,22 @@ pub fn clear_unflat(m: &[f64], o: &[f64], z: &[f64], is_mark: &mut [bool], p: &P
     let mid = spreads.len() / 2;
     let median = *spreads.select_nth_unstable_by(mid, f32::total_cmp).1 as f64;
     let tol = (p.flat_noise_factor * median).max(p.flat_min_spread_m) as f32;
-    let mut cleared = 0;
-    for (i, mark) in is_mark.iter_mut().enumerate().take(m.len()) {
-        if *mark && idx(i).is_some_and(|k| spread(k) > tol) {
-            *mark = false;
-            cleared += 1;
-        }
-    }
-    cleared
+    let nm = m.len().min(is_mark.len());
+    is_mark[..nm]
+        .par_iter_mut()
+        .enumerate()
+        .map(|(i, mark)| {
+            let clear = *mark && idx(i).is_some_and(|k| spread(k) > tol);
+            if clear {
+                *mark = false;
+            }
+            usize::from(clear)
+        })
+        .sum()
 }
+
+/// Parts of the points whose flatness grids [`clear_unflat`] fills side by side.
+const FLAT_PARTS: usize = 4;
 
 #[cfg(test)]
 mod tests {
