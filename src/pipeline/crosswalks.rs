@@ -324,18 +324,18 @@ fn regularise_group(
     }
     let mut slots: Vec<Slot> = Vec::new();
     for (k, s) in seen.iter().enumerate() {
-        if k > 0 {
-            if let Some(p) = grid {
-                let prev = seen[k - 1].c;
-                let m = ((s.c - prev) / p).round() as usize;
-                for j in 1..m {
-                    slots.push(Slot {
-                        c: prev + j as f64 * (s.c - prev) / m as f64,
-                        stripe: None,
-                        frags: Vec::new(),
-                        edge: 0,
-                    });
-                }
+        if k > 0
+            && let Some(p) = grid
+        {
+            let prev = seen[k - 1].c;
+            let m = ((s.c - prev) / p).round() as usize;
+            for j in 1..m {
+                slots.push(Slot {
+                    c: prev + j as f64 * (s.c - prev) / m as f64,
+                    stripe: None,
+                    frags: Vec::new(),
+                    edge: 0,
+                });
             }
         }
         slots.push(Slot {
