@@ -914,14 +914,11 @@ fn confirm_groups(items: &mut [(Candidate, Option<DropReason>)]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pipeline::types::test_pose;
+    use crate::pipeline::types::test_straight_trajectory;
 
     /// A straight trajectory along +x.
     fn refl() -> RefLine {
-        let poses = (0..=60)
-            .map(|i| test_pose(i as f64, i as f64 - 10.0, 0.0))
-            .collect();
-        RefLine::new(&Trajectory::new(poses).unwrap())
+        RefLine::new(&test_straight_trajectory(60, -10.0))
     }
 
     /// Points on a 3 cm grid where `inside(x, y)`, for x in 0..len, |y - 2| < 0.5.

@@ -463,10 +463,11 @@ fn regularise_group(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn rect(key: usize, class: MarkingClass, x0: f64, x1: f64, y0: f64, y1: f64) -> Mark {
+    /// An axis-aligned rectangular mark (also used by the `stoplines` tests).
+    pub(crate) fn rect(key: usize, class: MarkingClass, x0: f64, x1: f64, y0: f64, y1: f64) -> Mark {
         Mark {
             key,
             class,

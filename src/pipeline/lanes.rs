@@ -719,13 +719,10 @@ fn centreline(items: &[Item], members: &[usize], refl: &RefLine, p: &Params) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pipeline::types::test_pose;
+    use crate::pipeline::types::test_straight_trajectory;
 
     fn traj() -> Trajectory {
-        let poses = (0..=100)
-            .map(|i| test_pose(i as f64, i as f64 - 20.0, 0.0))
-            .collect();
-        Trajectory::new(poses).unwrap()
+        test_straight_trajectory(100, -20.0)
     }
 
     fn piece(key: usize, x0: f64, x1: f64, class: MarkingClass) -> LanePiece {

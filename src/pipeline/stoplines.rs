@@ -224,16 +224,7 @@ fn weighted_median(v: &mut [(f64, f64)]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn rect(key: usize, class: MarkingClass, x0: f64, x1: f64, y0: f64, y1: f64) -> Mark {
-        Mark {
-            key,
-            class,
-            ring: vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]],
-            confidence: 0.8,
-            point_count: 100,
-        }
-    }
+    use crate::pipeline::crosswalks::tests::rect;
 
     #[test]
     fn pieces_on_the_line_are_joined_and_others_are_not() {

@@ -719,6 +719,14 @@ pub(crate) fn test_pose(time: f64, x: f64, y: f64) -> Pose {
     }
 }
 
+/// A straight trajectory along +x with a pose every metre from `x0` to `x0 + n`, for
+/// the unit tests of the pipeline modules.
+#[cfg(test)]
+pub(crate) fn test_straight_trajectory(n: usize, x0: f64) -> Trajectory {
+    let poses = (0..=n).map(|i| test_pose(i as f64, i as f64 + x0, 0.0)).collect();
+    Trajectory::new(poses).expect("a straight trajectory is valid")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
