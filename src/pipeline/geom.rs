@@ -355,6 +355,21 @@ pub fn median(v: &mut [f64]) -> f64 {
     quantile_sorted(v, 0.5)
 }
 
+/// Weighted median of (value, weight) pairs (sorts them by value): the first value at
+/// which the running weight reaches half the total. NaN when empty.
+pub fn weighted_median(v: &mut [(f64, f64)]) -> f64 {
+    v.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let total: f64 = v.iter().map(|x| x.1).sum();
+    let mut acc = 0.0;
+    for x in v.iter() {
+        acc += x.1;
+        if acc >= total / 2.0 {
+            return x.0;
+        }
+    }
+    v.first().map_or(f64::NAN, |x| x.0)
+}
+
 /// Estimated extent (lo, hi) of the interval a sample was drawn from, treating the sample as
 /// uniform over it: trimmed quantiles rescaled for large samples (robust to a few strays),
 /// the range widened by one mean gap for small ones. `v` must be sorted and non-empty.
@@ -748,6 +763,14 @@ mod tests {
         let c = components_adaptive(&pts, 0.25, 0.9, 2);
         assert_eq!(c.len(), 3, "sparse line joined, dense bars kept apart");
         assert_eq!(components_adaptive(&pts, 0.25, 0.25, 2), components(&pts, 0.25));
+    }
+
+    #[test]
+    fn weighted_median_follows_the_weights() {
+        assert_eq!(weighted_median(&mut [(0.3, 1.5), (0.5, 6.0), (0.2, 1.5)]), 0.5);
+        assert_eq!(weighted_median(&mut [(0.3, 1.0), (0.1, 1.0), (0.2, 1.0)]), 0.2);
+        assert_eq!(weighted_median(&mut [(0.4, 0.0)]), 0.4);
+        assert!(weighted_median(&mut []).is_nan());
     }
 
     #[test]

@@ -126,7 +126,10 @@ pub fn plan(marks: &[Mark]) -> Vec<Join> {
             widths.push((w, l));
             centres.push((c, l));
         }
-        let (w, vc) = (weighted_median(&mut widths), weighted_median(&mut centres));
+        let (w, vc) = (
+            geom::weighted_median(&mut widths),
+            geom::weighted_median(&mut centres),
+        );
         let half = w / 2.0;
         let f = |u: f64, v: f64| pca.from_frame([u, v]);
         let (b0, b1) = (vc - half, vc + half);
@@ -204,21 +207,6 @@ fn centre_and_width(ring: &[[f64; 2]], pca: &geom::Pca) -> (f64, f64) {
         return (v, 0.0);
     }
     (cv / (3.0 * a2), (a2.abs() / 2.0) / (hi - lo))
-}
-
-/// Median of (value, weight) pairs by weight (sorts them); the first value when all
-/// weights are zero.
-fn weighted_median(v: &mut [(f64, f64)]) -> f64 {
-    v.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let total: f64 = v.iter().map(|x| x.1).sum();
-    let mut acc = 0.0;
-    for x in v.iter() {
-        acc += x.1;
-        if acc >= total / 2.0 {
-            return x.0;
-        }
-    }
-    v[0].0
 }
 
 #[cfg(test)]

@@ -356,15 +356,7 @@ fn widen_undersampled(pieces: &mut [Piece], lines: &[lanes::LaneResult], simplif
         if total < MIN_REFERENCE_LENGTH_M {
             continue;
         }
-        ws.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let mut acc = 0.0;
-        let median = ws
-            .iter()
-            .find(|w| {
-                acc += w.1;
-                acc >= total / 2.0
-            })
-            .map_or(ws[ws.len() - 1].0, |w| w.0);
+        let median = geom::weighted_median(&mut ws);
         for &k in &l.pieces {
             reference[k] = Some(median);
         }
