@@ -94,8 +94,11 @@ struct Seen {
     width: f64,
 }
 
-/// Principal axis and (lo, hi) extents along and across it of a ring's vertices.
-pub(crate) fn frame_of(ring: &[[f64; 2]]) -> (Pca, (f64, f64), (f64, f64)) {
+/// Principal axis of a ring's vertices and their (lo, hi) extents along and across it.
+pub(crate) type Frame = (Pca, (f64, f64), (f64, f64));
+
+/// The [`Frame`] of a ring.
+pub(crate) fn frame_of(ring: &[[f64; 2]]) -> Frame {
     let pca = Pca::of(ring);
     let mut u = (f64::INFINITY, f64::NEG_INFINITY);
     let mut v = (f64::INFINITY, f64::NEG_INFINITY);
@@ -105,20 +108,6 @@ pub(crate) fn frame_of(ring: &[[f64; 2]]) -> (Pca, (f64, f64), (f64, f64)) {
         v = (v.0.min(q[1]), v.1.max(q[1]));
     }
     (pca, u, v)
-}
-
-fn find(parent: &mut [usize], i: usize) -> usize {
-    let mut r = i;
-    while parent[r] != r {
-        r = parent[r];
-    }
-    let mut j = i;
-    while parent[j] != r {
-        let n = parent[j];
-        parent[j] = r;
-        j = n;
-    }
-    r
 }
 
 /// An edge line `e(c) = alpha + beta·c` over stripe ends `(c, end)`: `upper` edges bound the
@@ -163,13 +152,14 @@ pub fn plan(marks: &[Mark], fill_max: usize) -> Plan {
     let stripes: Vec<usize> = (0..marks.len())
         .filter(|&i| marks[i].class == MarkingClass::Crosswalk && marks[i].ring.len() >= 3)
         .collect();
-    let frames: Vec<_> = stripes.iter().map(|&i| frame_of(&marks[i].ring)).collect();
+    // Principal frames of every mark, once (groups and fragments use them).
+    let frames: Vec<Frame> = marks.iter().map(|m| frame_of(&m.ring)).collect();
     // 1. Groups.
     let mut parent: Vec<usize> = (0..stripes.len()).collect();
     for i in 0..stripes.len() {
         for j in i + 1..stripes.len() {
-            let (pi, ui, _) = &frames[i];
-            let (pj, _, _) = &frames[j];
+            let (pi, ui, _) = &frames[stripes[i]];
+            let (pj, _, _) = &frames[stripes[j]];
             if geom::acute_angle_deg(pi.axis, pj.axis) > MAX_STRIPE_ANGLE_DEG {
                 continue;
             }
@@ -187,21 +177,11 @@ pub fn plan(marks: &[Mark], fill_max: usize) -> Plan {
             let overlap = ui.1.min(hi) - ui.0.max(lo);
             let shorter = (ui.1 - ui.0).min(hi - lo);
             if overlap >= 0.3 * shorter {
-                let (a, b) = (find(&mut parent, i), find(&mut parent, j));
-                parent[a] = b;
+                geom::union(&mut parent, i, j);
             }
         }
     }
-    let mut groups: Vec<Vec<usize>> = Vec::new();
-    let mut root_of: Vec<Option<usize>> = vec![None; stripes.len()];
-    for i in 0..stripes.len() {
-        let r = find(&mut parent, i);
-        let g = *root_of[r].get_or_insert_with(|| {
-            groups.push(Vec::new());
-            groups.len() - 1
-        });
-        groups[g].push(i);
-    }
+    let groups = geom::merge_groups(&mut parent, (0..stripes.len()).map(|i| [i]));
     // Stripes of a group are never another group's fragments.
     let mut taken = vec![false; marks.len()];
     for g in groups.iter().filter(|g| g.len() >= 3) {
@@ -210,9 +190,13 @@ pub fn plan(marks: &[Mark], fill_max: usize) -> Plan {
         }
     }
     for g in groups.iter().filter(|g| g.len() >= 3) {
-        if let Some((reshape, fill)) =
-            regularise_group(marks, g.iter().map(|&s| stripes[s]), &mut taken, fill_max)
-        {
+        if let Some((reshape, fill)) = regularise_group(
+            marks,
+            &frames,
+            g.iter().map(|&s| stripes[s]),
+            &mut taken,
+            fill_max,
+        ) {
             out.reshape.extend(reshape);
             out.fill.extend(fill);
         }
@@ -224,17 +208,18 @@ type GroupEdits = (Vec<(usize, Stripe, Vec<usize>)>, Vec<(Stripe, f64)>);
 
 fn regularise_group(
     marks: &[Mark],
+    frames: &[Frame],
     members: impl Iterator<Item = usize>,
     taken: &mut [bool],
     fill_max: usize,
 ) -> Option<GroupEdits> {
     let members: Vec<usize> = members.collect();
     // 2. Frame: mean axis (sign-aligned), origin at the first stripe's centre.
-    let first = frame_of(&marks[members[0]].ring).0;
+    let first = frames[members[0]].0;
     let mut ax = [0.0, 0.0];
     for &m in &members {
         // Weighted by length²: a long stripe's axis is the better determined.
-        let (p, u, _) = frame_of(&marks[m].ring);
+        let (p, u, _) = frames[m];
         let wt = (u.1 - u.0).powi(2);
         let s = if p.axis[0] * first.axis[0] + p.axis[1] * first.axis[1] < 0.0 {
             -wt
@@ -267,7 +252,7 @@ fn regularise_group(
         }
         // Width in the mark's own frame: a stripe turned slightly off the group's axis
         // spans more across it than its painted width.
-        let (_, _, own) = frame_of(&marks[i].ring);
+        let own = frames[i].2;
         Seen {
             idx: i,
             c: (vlo + vhi) / 2.0,
@@ -373,7 +358,7 @@ fn regularise_group(
         if f.lo < lo_at(f.c) - 0.3 || f.hi > hi_at(f.c) + 0.3 {
             continue;
         }
-        let pca = frame_of(&mk.ring).0;
+        let pca = frames[i].0;
         let long = (f.hi - f.lo).max(f.width);
         let parallel = geom::acute_angle_deg(pca.axis, a) <= MAX_FRAGMENT_ANGLE_DEG;
         // A "stop line" parallel to the stripes is a stripe; one across them is not.

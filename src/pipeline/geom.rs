@@ -266,7 +266,7 @@ pub fn union(parent: &mut [usize], a: usize, b: usize) -> bool {
 
 /// The members of union-find elements merged per set: `members[e]` belongs to element `e`.
 /// Each group sorted; groups ordered by their first member.
-fn merge_groups<I>(parent: &mut [usize], members: impl IntoIterator<Item = I>) -> Vec<Vec<usize>>
+pub fn merge_groups<I>(parent: &mut [usize], members: impl IntoIterator<Item = I>) -> Vec<Vec<usize>>
 where
     I: IntoIterator<Item = usize>,
 {

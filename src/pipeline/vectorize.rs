@@ -42,6 +42,7 @@ use super::dashes;
 use super::geom;
 use super::lanes::{self, LanePiece};
 use super::outline;
+use super::pavement::check_range;
 use super::refline::RefLine;
 use super::stoplines;
 use super::types::{LaneLine, LaneLineClass, Marking, MarkingClass, PointCloud, Trajectory};
@@ -121,48 +122,18 @@ impl Default for Params {
 impl Params {
     /// Check every field; the message names the offending parameter.
     pub fn validate(&self) -> Result<(), String> {
-        if !(self.curved_min_sagitta_m >= 0.0 && self.curved_min_sagitta_m <= 1.0) {
-            return Err(format!(
-                "curved_min_sagitta_m must be in [0, 1], got {}",
-                self.curved_min_sagitta_m
-            ));
-        }
-        if !(self.outline_simplify_m >= 0.0 && self.outline_simplify_m <= 0.5) {
-            return Err(format!(
-                "outline_simplify_m must be in [0, 0.5], got {}",
-                self.outline_simplify_m
-            ));
-        }
-        if !(self.max_bar_width_m >= 0.1 && self.max_bar_width_m <= 20.0) {
-            return Err(format!(
-                "max_bar_width_m must be in [0.1, 20], got {}",
-                self.max_bar_width_m
-            ));
-        }
-        if !(self.bridge_solid_gap_m >= 0.0 && self.bridge_solid_gap_m <= 50.0) {
-            return Err(format!(
-                "bridge_solid_gap_m must be in [0, 50], got {}",
-                self.bridge_solid_gap_m
-            ));
-        }
-        if self.fill_missing_dashes > 10 {
-            return Err(format!(
-                "fill_missing_dashes must be in [0, 10], got {}",
-                self.fill_missing_dashes
-            ));
-        }
-        if !(self.bridge_long_gap_m >= 0.0 && self.bridge_long_gap_m <= 50.0) {
-            return Err(format!(
-                "bridge_long_gap_m must be in [0, 50], got {}",
-                self.bridge_long_gap_m
-            ));
-        }
-        if self.fill_missing_stripes > 10 {
-            return Err(format!(
-                "fill_missing_stripes must be in [0, 10], got {}",
-                self.fill_missing_stripes
-            ));
-        }
+        check_range("curved_min_sagitta_m", self.curved_min_sagitta_m, 0.0, 1.0)?;
+        check_range("outline_simplify_m", self.outline_simplify_m, 0.0, 0.5)?;
+        check_range("max_bar_width_m", self.max_bar_width_m, 0.1, 20.0)?;
+        check_range("bridge_solid_gap_m", self.bridge_solid_gap_m, 0.0, 50.0)?;
+        check_range("bridge_long_gap_m", self.bridge_long_gap_m, 0.0, 50.0)?;
+        check_range("fill_missing_dashes", self.fill_missing_dashes as f64, 0.0, 10.0)?;
+        check_range(
+            "fill_missing_stripes",
+            self.fill_missing_stripes as f64,
+            0.0,
+            10.0,
+        )?;
         self.lane_lines.validate()
     }
 }
@@ -916,6 +887,15 @@ mod tests {
         let bad: Params = serde_json::from_str(r#"{"lane_lines": {"max_angle_deg": -1}}"#).unwrap();
         assert!(bad.validate().unwrap_err().contains("max_angle_deg"));
         assert!(serde_json::from_str::<Params>(r#"{"lanes": {}}"#).is_err());
+        for (field, json) in [
+            ("curved_min_sagitta_m", r#"{"curved_min_sagitta_m": 2}"#),
+            ("max_bar_width_m", r#"{"max_bar_width_m": 0}"#),
+            ("bridge_long_gap_m", r#"{"bridge_long_gap_m": 60}"#),
+            ("fill_missing_stripes", r#"{"fill_missing_stripes": 11}"#),
+        ] {
+            let bad: Params = serde_json::from_str(json).unwrap();
+            assert!(bad.validate().unwrap_err().starts_with(field), "{field}");
+        }
     }
 
     fn solid(x0: f64, x1: f64) -> Piece {
