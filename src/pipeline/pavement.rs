@@ -46,7 +46,8 @@
 //! 0.3, `buffer_above_m` 0.3, `window_m` 0.4 (paper), `road_thickness_m` 0.06,
 //! `max_cross_slope` 0.1, `max_gap_m` 3.0, `max_offset_m` 30, `reenter` true,
 //! `reentry_min_width_m` 3, `reentry_min_separation_m` 1, `reentry_max_step_m` 1,
-//! `edge_margin_m` 0.05 (points this close to the face of a curb or barrier are cut with it),
+//! `edge_margin_m` 0.05 (points this close to the face of a curb, barrier or object on the
+//! road are cut with it), `object_min_height_m` 0.5,
 //! `seed` 0; `verge` (nested, see [`super::pavement_verge`]).
 //!
 //! **Reference.** Yao L., Qin C., Chen Q., Wu H., Zhang S. (2019) Automatic extraction and
@@ -114,6 +115,10 @@ pub struct Params {
     /// bright returns at road height within the scanner's noise of the face, and paint is
     /// never that close to it. 0 keeps everything up to the face.
     pub edge_margin_m: f64,
+    /// A window more than this (m) above the road is the top of an object standing on it
+    /// (a car's roof), never a sidewalk or a second carriageway: the walk crosses it like a
+    /// gap instead of ending the road there.
+    pub object_min_height_m: f64,
     /// Seed of the per-slice RANSAC generators.
     pub seed: u64,
     /// Parameters of the scan-line method (`method: "scan_lines"`).
@@ -143,6 +148,7 @@ impl Default for Params {
             reentry_min_separation_m: 1.0,
             reentry_max_step_m: 1.0,
             edge_margin_m: 0.05,
+            object_min_height_m: 0.5,
             seed: 0,
             scan_lines: pavement_scanline::Params::default(),
             verge: pavement_verge::Params::default(),
@@ -186,6 +192,7 @@ impl Params {
         )?;
         check_range("reentry_max_step_m", self.reentry_max_step_m, 0.0, 100.0)?;
         check_range("edge_margin_m", self.edge_margin_m, 0.0, 2.0)?;
+        check_range("object_min_height_m", self.object_min_height_m, 0.05, 10.0)?;
         self.scan_lines
             .validate()
             .map_err(|e| format!("scan_lines.{e}"))?;
@@ -271,6 +278,26 @@ fn run_slices(input: &Input<'_>, p: &Params) -> Vec<usize> {
 fn quantile(v: &mut [f64], q: f64) -> f64 {
     let k = ((v.len() - 1) as f64 * q).round() as usize;
     *v.select_nth_unstable_by(k, f64::total_cmp).1
+}
+
+/// The ground of a window from its pseudo scan points (lowest points per bin): the median
+/// of the lowest band `band` high that holds at least a fifth of them (and two). Where a
+/// tree canopy, a wall's overhang or a car body hides most bins, their lowest points are up
+/// there; the plain median would put the ground there too and end the road under a tree.
+/// A lone low outlier (multipath) does not make a band. Reorders `v`.
+fn lowest_level(v: &mut [f64], band: f64) -> f64 {
+    v.sort_unstable_by(f64::total_cmp);
+    let need = v.len().div_ceil(5).max(2).min(v.len());
+    let mut hi = 0;
+    for lo in 0..v.len() {
+        while hi < v.len() && v[hi] <= v[lo] + band {
+            hi += 1;
+        }
+        if hi - lo >= need {
+            return v[lo + (hi - lo) / 2];
+        }
+    }
+    v[v.len() / 2]
 }
 
 /// A fitted road plane z = a + b·u + c·s.
@@ -470,7 +497,7 @@ fn slice_pavement(idx: &[usize], input: &Input<'_>, s_start: f64, slice_id: i64,
             thick: 0.0,
         };
         if !ground_of[w].is_empty() {
-            let ground = quantile(&mut ground_of[w], 0.5);
+            let ground = lowest_level(&mut ground_of[w], p.buffer_above_m);
             win.members = mem
                 .iter()
                 .copied()
@@ -504,12 +531,17 @@ fn slice_pavement(idx: &[usize], input: &Input<'_>, s_start: f64, slice_id: i64,
     let in_range = |k: i64| k.abs() <= max_w && k >= w_lo - 1 && k <= w_hi + 1;
     let flat = |w: &Window| w.thick <= thickness;
     let near = |r: f64, lvl: f64| (r - lvl).abs() <= thickness;
-    let take = |w: &Window, lvl: f64, keep: &mut Vec<usize>| {
+    // `keep` holds indices into `res`; `taken[w]` the level window `w` was taken at.
+    let mut taken = vec![f64::NAN; nw];
+    let take = |k: i64, lvl: f64, keep: &mut Vec<usize>, taken: &mut [f64]| {
+        let w = (k - w_lo) as usize;
+        taken[w] = lvl;
         keep.extend(
-            w.members
+            windows[w]
+                .members
                 .iter()
-                .filter(|&&m| near(res[m].2, lvl))
-                .map(|&m| res[m].0),
+                .copied()
+                .filter(|&m| near(res[m].2, lvl)),
         );
     };
     // Reference level: the window under the vehicle when it is flat, else the plane.
@@ -548,7 +580,7 @@ fn slice_pavement(idx: &[usize], input: &Input<'_>, s_start: f64, slice_id: i64,
                             // A second carriageway beyond a median: road again.
                             for &j in &run {
                                 let wj = get(j).expect("run windows are non-empty");
-                                take(wj, wj.level, &mut keep);
+                                take(j, wj.level, &mut keep, &mut taken);
                             }
                             run.clear();
                             on_road = true;
@@ -586,6 +618,17 @@ fn slice_pavement(idx: &[usize], input: &Input<'_>, s_start: f64, slice_id: i64,
                 k += dir;
                 continue;
             };
+            if w.level - prev > p.object_min_height_m {
+                // The top of an object standing on the road (a car's roof, a canopy with no
+                // ground return under it): crossed like a gap, the road may go on beyond.
+                gap += p.window_m;
+                if gap > p.max_gap_m {
+                    on_road = false;
+                    last_road = k;
+                }
+                k += dir;
+                continue;
+            }
             let allowance = thickness + p.max_cross_slope * (gap + p.window_m);
             if (w.level - prev).abs() > allowance {
                 // The surface steps up (sidewalk) or down (ditch): end of this road.
@@ -594,7 +637,7 @@ fn slice_pavement(idx: &[usize], input: &Input<'_>, s_start: f64, slice_id: i64,
                 continue; // re-examine this window off the road
             }
             if flat(w) {
-                take(w, w.level, &mut keep);
+                take(k, w.level, &mut keep, &mut taken);
                 prev = w.level;
                 gap = 0.0;
                 k += dir;
@@ -606,7 +649,7 @@ fn slice_pavement(idx: &[usize], input: &Input<'_>, s_start: f64, slice_id: i64,
             let mut returns = false;
             while look_gap <= p.max_gap_m && in_range(j) {
                 match get(j) {
-                    Some(x) if flat(x) => {
+                    Some(x) if flat(x) && x.level - prev <= p.object_min_height_m => {
                         let allow =
                             thickness + p.max_cross_slope * (look_gap + p.window_m * (j - k).abs() as f64);
                         returns = (x.level - prev).abs() <= allow;
@@ -617,7 +660,7 @@ fn slice_pavement(idx: &[usize], input: &Input<'_>, s_start: f64, slice_id: i64,
                 j += dir;
             }
             if returns {
-                take(w, prev, &mut keep);
+                take(k, prev, &mut keep, &mut taken);
                 gap = 0.0;
                 k += dir;
                 continue;
@@ -633,26 +676,83 @@ fn slice_pavement(idx: &[usize], input: &Input<'_>, s_start: f64, slice_id: i64,
             } else {
                 high.fold(f64::NEG_INFINITY, f64::max)
             };
-            keep.extend(
-                w.members
-                    .iter()
-                    .filter(|&&m| {
-                        let (_, u, r) = res[m];
-                        near(r, prev)
-                            && if dir == 1 {
-                                u < cut - p.edge_margin_m
-                            } else {
-                                u > cut + p.edge_margin_m
-                            }
-                    })
-                    .map(|&m| res[m].0),
-            );
+            keep.extend(w.members.iter().filter(|&&m| {
+                let (_, u, r) = res[m];
+                near(r, prev)
+                    && if dir == 1 {
+                        u < cut - p.edge_margin_m
+                    } else {
+                        u > cut + p.edge_margin_m
+                    }
+            }));
+            taken[(k - w_lo) as usize] = prev;
             on_road = false;
             last_road = k;
             k += dir;
         }
     }
-    keep
+    if p.edge_margin_m > 0.0 {
+        drop_feet(
+            &mut keep,
+            &windows,
+            &taken,
+            &res,
+            &pts,
+            thickness,
+            p.edge_margin_m,
+        );
+    }
+    keep.into_iter().map(|m| res[m].0).collect()
+}
+
+/// The foot of any vertical face standing on the road (a parked car's side, a bollard, a
+/// trunk, the end of a barrier), not only of the face that ends the walk: points within
+/// `margin` (in the road plane) of a point clearly above the level its window was taken
+/// at (or a taken neighbour's) are cut. They scatter at road height within the scanner's
+/// noise of the face and are as bright as the face, not paint. `keep` indexes `res`/`pts`.
+fn drop_feet(
+    keep: &mut Vec<usize>,
+    windows: &[Window],
+    taken: &[f64],
+    res: &[(usize, f64, f64)],
+    pts: &[(usize, f64, f64, f64)],
+    thickness: f64,
+    margin: f64,
+) {
+    let level = |w: usize| {
+        let own = taken[w];
+        if !own.is_nan() {
+            return Some(own);
+        }
+        [w.wrapping_sub(1), w + 1]
+            .into_iter()
+            .filter_map(|j| taken.get(j).copied())
+            .find(|l| !l.is_nan())
+    };
+    // (s, u) of the face points, ordered by s.
+    let mut high: Vec<(f64, f64)> = Vec::new();
+    for (w, win) in windows.iter().enumerate() {
+        let Some(lvl) = level(w) else { continue };
+        high.extend(
+            win.members
+                .iter()
+                .filter(|&&m| res[m].2 > lvl + thickness)
+                .map(|&m| (pts[m].2, res[m].1)),
+        );
+    }
+    if high.is_empty() {
+        return;
+    }
+    high.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
+    let m2 = margin * margin;
+    keep.retain(|&m| {
+        let (s, u) = (pts[m].2, res[m].1);
+        let from = high.partition_point(|h| h.0 < s - margin);
+        !high[from..]
+            .iter()
+            .take_while(|h| h.0 <= s + margin)
+            .any(|h| (h.0 - s).powi(2) + (h.1 - u).powi(2) <= m2)
+    });
 }
 
 #[cfg(test)]
@@ -748,6 +848,102 @@ mod tests {
             ..Params::default()
         });
         assert!(foot0 > 0, "the scene has no foot points to cut");
+    }
+
+    /// A flat road (u ∈ [-2, 8)) under a tree canopy 5 m up over u ∈ [4, 7] that hides the
+    /// ground of most pseudo-scan bins there (one ground return in six canopy returns): the
+    /// road under and beyond the canopy is still road, the canopy is not.
+    #[test]
+    fn the_road_under_a_tree_canopy_is_kept() {
+        let (mut m, mut u, mut z) = (Vec::new(), Vec::new(), Vec::new());
+        let mut jit = crate::pipeline::geom::test_jitter(11);
+        for i in 0..200 {
+            let mm = i as f64 * 0.05;
+            for j in 0..400 {
+                let uu = -2.0 + j as f64 * 0.025 + 0.005 * jit();
+                let under = (4.0..7.0).contains(&uu);
+                if under && j % 6 != 0 {
+                    m.push(mm + 0.01 * jit());
+                    u.push(uu);
+                    z.push(5.0 + 0.3 * jit().abs());
+                    continue;
+                }
+                m.push(mm + 0.01 * jit());
+                u.push(uu);
+                z.push(0.004 * jit());
+            }
+        }
+        let kept = run_on(&m, &u, &z, &Params::default());
+        let canopy = kept.iter().filter(|&&i| z[i] > 1.0).count();
+        let beyond = kept.iter().filter(|&&i| u[i] > 7.2 && z[i] < 1.0).count();
+        let under = kept
+            .iter()
+            .filter(|&&i| (4.0..7.0).contains(&u[i]) && z[i] < 1.0)
+            .count();
+        let total =
+            |r: std::ops::Range<f64>| (0..u.len()).filter(|&i| r.contains(&u[i]) && z[i] < 1.0).count();
+        assert_eq!(canopy, 0, "canopy points kept as road");
+        assert!(
+            under as f64 > 0.95 * total(4.0..7.0) as f64,
+            "under the canopy: {under}"
+        );
+        assert!(
+            beyond as f64 > 0.95 * total(7.2..9.0) as f64,
+            "beyond the canopy: {beyond}"
+        );
+    }
+
+    /// A box 1.5 m high (a parked car) standing on the road at u ∈ [3, 4.8] over the middle
+    /// 4 m of a 10 m stretch, its faces scattering returns from road height up: the road on
+    /// both sides of it stays, the bright foot of its faces goes with it.
+    #[test]
+    fn the_foot_of_an_object_on_the_road_is_cut() {
+        let (mut m, mut u, mut z) = (Vec::new(), Vec::new(), Vec::new());
+        let mut jit = crate::pipeline::geom::test_jitter(13);
+        let on_box = |mm: f64, uu: f64| (3.0..4.8).contains(&uu) && (3.0..7.0).contains(&mm);
+        for i in 0..200 {
+            let mm = i as f64 * 0.05;
+            for j in 0..320 {
+                let uu = -2.0 + j as f64 * 0.025 + 0.005 * jit();
+                if !on_box(mm, uu) {
+                    m.push(mm + 0.01 * jit());
+                    u.push(uu);
+                    z.push(0.004 * jit());
+                }
+            }
+            if (3.0..7.0).contains(&mm) {
+                // The near face, and the roof.
+                for h in 0..60 {
+                    m.push(mm + 0.01 * jit());
+                    u.push(3.0 + 0.02 * jit());
+                    z.push(h as f64 * 0.025 + 0.004 * jit());
+                }
+                for j in 0..72 {
+                    m.push(mm);
+                    u.push(3.0 + j as f64 * 0.025);
+                    z.push(1.5);
+                }
+            }
+        }
+        let kept = run_on(&m, &u, &z, &Params::default());
+        let face_foot = kept
+            .iter()
+            .filter(|&&i| (2.98..3.05).contains(&u[i]) && (3.05..6.95).contains(&m[i]))
+            .count();
+        let beside = kept.iter().filter(|&&i| u[i] < 2.9 && z[i] < 0.1).count();
+        let beside_total = (0..u.len()).filter(|&i| u[i] < 2.9 && z[i] < 0.1).count();
+        let beyond = kept.iter().filter(|&&i| u[i] > 5.0).count();
+        let beyond_total = (0..u.len()).filter(|&i| u[i] > 5.0).count();
+        assert_eq!(face_foot, 0, "the object's foot kept as road");
+        assert!(kept.iter().all(|&i| z[i] < 0.1), "object points kept as road");
+        assert!(
+            beside as f64 > 0.97 * beside_total as f64,
+            "beside: {beside} of {beside_total}"
+        );
+        assert!(
+            beyond as f64 > 0.95 * beyond_total as f64,
+            "beyond: {beyond} of {beyond_total}"
+        );
     }
 
     #[test]
