@@ -383,10 +383,7 @@ fn line_geometry(pts: &[[f64; 2]], refl: &RefLine, p: &Params) -> Option<LineGeo
     }
     resid.sort_unstable_by(f64::total_cmp);
     let (r0, r1) = geom::robust_extent(&resid);
-    let width = (r1 - r0) * cosang;
-    if width > p.line_max_width_m || ext * cosang < 3.0 * width.max(0.05) {
-        return None;
-    }
+    let mut width = (r1 - r0) * cosang;
     // A painted line has one width along its length; an arrow (narrow shaft, wide head)
     // whose overall width stays under `line_max_width_m` does not. Slices with few points
     // (sparse far lines) measure no width.
@@ -417,6 +414,21 @@ fn line_geometry(pts: &[[f64; 2]], refl: &RefLine, p: &Params) -> Option<LineGeo
         if width > wide_from && wide >= 2 && wide as f64 >= WIDE_SLICE_SHARE * slice_w.len() as f64 {
             return None;
         }
+        // Fewer wide slices, all within the end sixths: a mark touching the line's end (an
+        // arrow, a stop line) inflated the spread of the residuals; the line's own width
+        // is the typical one.
+        let n = slice_w.len();
+        let at_ends = slice_w
+            .iter()
+            .enumerate()
+            .filter(|&(_, &(w, filled))| filled && w > wide_from)
+            .all(|(i, _)| 6 * i < n || 6 * i >= 5 * n);
+        if width > typical + LINE_WIDTH_SLACK_M && wide > 0 && at_ends {
+            width = typical;
+        }
+    }
+    if width > p.line_max_width_m || ext * cosang < 3.0 * width.max(0.05) {
+        return None;
     }
     let angle = slope.abs().atan().to_degrees();
     // Local angles too: a piece bending across the road is not a lane line.
