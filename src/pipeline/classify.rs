@@ -972,4 +972,17 @@ mod tests {
         });
         assert!(line_geometry(&double, &r, &p).is_some());
     }
+
+    /// A 20 m edge line 0.15 m wide with a 1 m square mark touching its end (an arrow's
+    /// head, a stop line) is still a line, of its own width, not a 1 m wide "line".
+    #[test]
+    fn a_mark_touching_a_lines_end_does_not_widen_it() {
+        let (r, p) = (refl(), Params::default());
+        let line = paint(20.0, |x, y| y.abs() <= 0.075 || x >= 19.0);
+        let g = line_geometry(&line, &r, &p).expect("a line with a mark at its end is a line");
+        assert!((g.width_m - 0.15).abs() < 0.04, "width {}", g.width_m);
+        // The same mark in the middle of the line is no end: not a line.
+        let middle = paint(20.0, |x, y| y.abs() <= 0.075 || (9.5..10.5).contains(&x));
+        assert!(line_geometry(&middle, &r, &p).is_none_or(|g| g.width_m > 0.5));
+    }
 }
