@@ -28,7 +28,10 @@
 //!    by more than the road thickness (plus `max_cross_slope` times the distance) also ends
 //!    the road, and so does a gap without points wider than `max_gap_m`. The road thickness
 //!    is `road_thickness_m`, raised to 1.5 × the median window thickness of the slice when
-//!    the scanner is noisier than that.
+//!    the scanner is noisier than that. A window's ground (the centre of its buffer) is the
+//!    lowest band of its pseudo points holding a fifth of them, so a tree canopy or a car
+//!    body over most of its bins does not lift it; and the foot of any face standing on
+//!    the road (a parked car's side, a bollard) is cut within `edge_margin_m` like a curb's.
 //!
 //! Nothing depends on the order of the points, so interleaved scanner heads are fine.
 //!
@@ -478,7 +481,7 @@ fn slice_pavement(idx: &[usize], input: &Input<'_>, s_start: f64, slice_id: i64,
     for q in &pseudo {
         ground_of[(wi(q[0]) - w_lo) as usize].push(q[2] - plane.at(q[0], q[1]));
     }
-    // Per window: the ground is the median of its lowest points; the buffer keeps the points
+    // Per window: the ground is the lowest band of its lowest points (`lowest_level`); the buffer keeps the points
     // from `buffer_below_m` under to `buffer_above_m` over it (the paper's buffer, made
     // local so that a far carriageway at another height is not cut away).
     let mut windows: Vec<Window> = Vec::with_capacity(nw);
