@@ -405,10 +405,11 @@ fn line_geometry(pts: &[[f64; 2]], refl: &RefLine, p: &Params) -> Option<LineGeo
     if slice_w.len() >= 4 {
         let typical = geom::median(&mut slice_w.iter().map(|w| w.0).collect::<Vec<f64>>());
         let wide_from = (p.line_max_width_ratio * typical).max(typical + LINE_WIDTH_SLACK_M);
-        let wide = slice_w
-            .iter()
-            .filter(|&&(w, filled)| filled && w > wide_from)
-            .count();
+        // Positions of the wide (filled) slices.
+        let wide_at: Vec<usize> = (0..slice_w.len())
+            .filter(|&i| slice_w[i].1 && slice_w[i].0 > wide_from)
+            .collect();
+        let wide = wide_at.len();
         // A few wide slices are something touching the line's end (a stop line, a
         // crosswalk stripe); a tenth of its length is a part of its own shape.
         if width > wide_from && wide >= 2 && wide as f64 >= WIDE_SLICE_SHARE * slice_w.len() as f64 {
@@ -418,11 +419,7 @@ fn line_geometry(pts: &[[f64; 2]], refl: &RefLine, p: &Params) -> Option<LineGeo
         // arrow, a stop line) inflated the spread of the residuals; the line's own width
         // is the typical one.
         let n = slice_w.len();
-        let at_ends = slice_w
-            .iter()
-            .enumerate()
-            .filter(|&(_, &(w, filled))| filled && w > wide_from)
-            .all(|(i, _)| 6 * i < n || 6 * i >= 5 * n);
+        let at_ends = wide_at.iter().all(|&i| 6 * i < n || 6 * i >= 5 * n);
         if width > typical + LINE_WIDTH_SLACK_M && wide > 0 && at_ends {
             width = typical;
         }
