@@ -196,8 +196,20 @@ struct Seg {
     o1: f64,
     slope0: f64,
     slope1: f64,
+    /// Along-track length the end slopes were fitted over (m): a short piece's direction
+    /// is uncertain by about [`SLOPE_NOISE_M`] over it.
+    span: f64,
     width: f64,
 }
+
+/// Lateral uncertainty (m) of a piece's end over the length its slope is fitted on: the
+/// direction of a piece L metres long is known to about atan(SLOPE_NOISE_M / L) (3° for a
+/// 1 m far-range fragment, 0.2° for 15 m), which is added to `max_angle_deg`.
+const SLOPE_NOISE_M: f64 = 0.05;
+
+/// Gaps (m) up to which the direction slack of short pieces applies in full; beyond, it
+/// shrinks in proportion.
+const SLACK_GAP_M: f64 = 3.0;
 
 /// Least-squares slope do/ds of samples with s within `span` of the start or end.
 fn end_slope(so: &[[f64; 2]], at_end: bool, span: f64) -> f64 {
@@ -243,6 +255,7 @@ fn seg_of(items: &[Item], members: Vec<usize>) -> Seg {
         o1: so[so.len() - 1][1],
         slope0: end_slope(&so, false, 15.0),
         slope1: end_slope(&so, true, 15.0),
+        span: (so[so.len() - 1][0] - so[0][0]).clamp(0.1, 15.0),
         width: w,
         members,
     }
@@ -277,7 +290,11 @@ fn link(segs: &[Seg], p: &Params, barriers: &[[f64; 4]]) -> Vec<Vec<usize>> {
             if dev > tol {
                 continue;
             }
-            if (sa.slope1.atan() - sb.slope0.atan()).abs() > max_tan {
+            // ... but only across short gaps: two short pieces far apart are weak evidence
+            // of one line whatever their directions.
+            let slack = ((SLOPE_NOISE_M / sa.span).atan() + (SLOPE_NOISE_M / sb.span).atan())
+                * (SLACK_GAP_M / g.max(1e-6)).min(1.0);
+            if (sa.slope1.atan() - sb.slope0.atan()).abs() > max_tan + slack {
                 continue;
             }
             // Widths compared with 5 cm added: sparse far-range pieces under-read their
@@ -758,5 +775,48 @@ mod tests {
         assert_eq!(lanes.lines.len(), 1);
         assert_eq!(lanes.lines[0].class, LaneLineClass::DashedLine);
         assert_eq!(lanes.lines[0].pieces.len(), 8);
+    }
+
+    /// A far-range line reads as 1 m fragments whose own directions scatter by ±4°
+    /// (a few points across): over short gaps they are one lane line although the
+    /// fragments differ by 8°, more than `max_angle_deg`. Two such fragments 12 m apart
+    /// with the same disagreement are not joined: the slack is for short gaps only.
+    #[test]
+    fn short_fragments_with_noisy_directions_link_across_short_gaps_only() {
+        let t = traj();
+        let p = Params::default();
+        let tilt = 4f64.to_radians().tan() / 2.0;
+        let frag = |key: usize, x0: f64, sign: f64| LanePiece {
+            key,
+            class: MarkingClass::SolidLine,
+            centerline: vec![[x0, 3.5 + sign * tilt], [x0 + 1.0, 3.5 - sign * tilt]],
+            width_m: 0.12,
+            confidence: 0.8,
+        };
+        let line: Vec<LanePiece> = (0..12)
+            .map(|i| frag(i, 2.5 * i as f64, if i % 2 == 0 { 1.0 } else { -1.0 }))
+            .collect();
+        let lanes = grow(&line, &t, &p);
+        assert_eq!(
+            lanes.lines.len(),
+            1,
+            "{:?}",
+            lanes.lines.iter().map(|l| &l.pieces).collect::<Vec<_>>()
+        );
+        assert_eq!(lanes.lines[0].pieces.len(), 12);
+        let lenient = Params {
+            min_paint_share: 0.0,
+            min_length_m: 0.0,
+            ..Params::default()
+        };
+        let apart = [frag(0, 0.0, 1.0), frag(1, 13.0, -1.0)];
+        assert!(
+            grow(&apart, &t, &lenient)
+                .lines
+                .iter()
+                .all(|l| l.pieces.len() == 1)
+        );
+        let aligned = [frag(0, 0.0, 0.0), frag(1, 13.0, 0.0)];
+        assert_eq!(grow(&aligned, &t, &lenient).lines[0].pieces.len(), 2);
     }
 }
