@@ -20,7 +20,8 @@
 //!    in the middle of the gap (extrapolating each along its own slope, so lines that drift
 //!    across the trajectory during a lane change are followed) within
 //!    `lateral_tolerance_m + lateral_tolerance_per_m × gap`, their directions differ ≤
-//!    `max_angle_deg`, and their widths are similar (≥ `min_width_similarity`; lengths are
+//!    `max_angle_deg` (plus, across gaps up to 3 m, the direction uncertainty of short
+//!    pieces: atan(0.05 m / length) each, so a far line's 1 m fragments chain), and their widths are similar (≥ `min_width_similarity`; lengths are
 //!    not compared, so dashes and solid pieces join). Links are made between mutual best
 //!    matches (cost = offset mismatch / tolerance + gap / 2·max_gap), so the result does not
 //!    depend on a seed cluster and growth runs in both directions at once. Two rounds: the
