@@ -32,6 +32,13 @@
 //!      straight bar (≤ `max_bar_width_m`); parts attached to it are split off when they are
 //!      parallel filled bars, or perpendicular objects lying on one side of the bar with the
 //!      bar overhanging both their ends (an arrow tip touching a stop line).
+//! 3. **Stacked scan rows** (`join_rows`): at far range the scanner samples the road in
+//!    rows dense along them and 0.3–0.6 m apart across, so a crosswalk stripe becomes a
+//!    stack of short parallel one-row fragments (one per row crossing it). Fragments that
+//!    are single rows, at most 1 m long, parallel, side by side and at most `max_radius_m`
+//!    apart across are joined (`geom::join_row_fragments`) — after step 2, whose valley rule
+//!    would cut the stack apart again at the empty gaps between the rows. Collinear
+//!    fragments (the next stripe along the same row) are never joined by this rule.
 //!
 //! # Parameters
 //! See [`Params`]; all lengths in metres.
@@ -63,6 +70,10 @@ pub struct Params {
     pub max_radius_m: f64,
     /// Components with fewer points are dropped as noise. Default 5.
     pub min_points: usize,
+    /// Join stacked far-range scan-row fragments of one painted bar (parallel one-row
+    /// pieces side by side, at most `max_radius_m` apart across them; see
+    /// `geom::join_row_fragments`). Default true.
+    pub join_rows: bool,
     /// Split merged objects (dash touching a solid line, parallel lines, arrow touching a
     /// stop line). Default true.
     pub split: bool,
@@ -82,6 +93,7 @@ impl Default for Params {
             radius_m: 0.25,
             max_radius_m: 0.6,
             min_points: 5,
+            join_rows: true,
             split: true,
             max_line_width_m: 0.35,
             max_bar_width_m: 0.6,
@@ -147,13 +159,13 @@ pub fn run(cloud: &PointCloud, params: &Params) -> Vec<Cluster> {
         .collect();
     let fxy: Vec<[f64; 2]> = finite.iter().map(|&i| xy[i]).collect();
     let comps = geom::components_adaptive(&fxy, params.radius_m, params.max_radius_m, 2);
-    let mut groups: Vec<(Vec<usize>, bool)> = comps
+    let parts: Vec<(Vec<usize>, bool)> = comps
         .into_par_iter()
-        .filter(|c| c.len() >= params.min_points)
+        .filter(|c| c.len() >= params.min_points || params.join_rows)
         .flat_map_iter(|c| {
             let mut idx: Vec<usize> = c.into_iter().map(|i| finite[i]).collect();
             canonical_sort(&xy, &mut idx);
-            let parts = if params.split {
+            let parts = if params.split && idx.len() >= params.min_points {
                 split(&xy, idx, params, 0)
             } else {
                 vec![idx]
@@ -161,8 +173,32 @@ pub fn run(cloud: &PointCloud, params: &Params) -> Vec<Cluster> {
             let was_split = parts.len() > 1;
             parts.into_iter().map(move |p| (p, was_split))
         })
-        .filter(|(c, _)| c.len() >= params.min_points)
         .collect();
+    // Stacked scan-row fragments of one far bar are joined after the splitting, whose
+    // lateral-valley rule would cut them apart again at the empty gaps between the rows.
+    let mut groups: Vec<(Vec<usize>, bool)> = if params.join_rows {
+        let mut split_of = vec![false; xy.len()];
+        for (g, s) in &parts {
+            for &i in g {
+                split_of[i] = *s;
+            }
+        }
+        let joined = geom::join_row_fragments(
+            &xy,
+            parts.into_iter().map(|(g, _)| g).collect(),
+            params.max_radius_m,
+        );
+        joined
+            .into_iter()
+            .map(|g| {
+                let s = g.iter().any(|&i| split_of[i]);
+                (g, s)
+            })
+            .collect()
+    } else {
+        parts
+    };
+    groups.retain(|(c, _)| c.len() >= params.min_points);
     for (g, _) in groups.iter_mut() {
         canonical_sort(&xy, g);
     }
@@ -799,6 +835,29 @@ mod tests {
             99,
             "non-finite points are ignored"
         );
+    }
+
+    /// Three far crosswalk stripes (0.45 m wide, 3 m long, 1.05 m apart) seen by scan
+    /// rows 0.45 m apart: one cluster per stripe, although each stripe's rows are 0.45 m
+    /// apart (beyond `radius_m`) and the empty gaps between them are lateral valleys;
+    /// with `join_rows` off each row piece is a cluster of its own.
+    #[test]
+    fn far_stripes_crossed_by_rows_are_one_cluster_each() {
+        let mut pts = Vec::new();
+        for stripe in 0..3 {
+            for r in 0..7 {
+                for k in 0..9 {
+                    pts.push([1.05 * stripe as f64 + 0.05 * k as f64, 0.45 * r as f64]);
+                }
+            }
+        }
+        let c = run(&cloud(&pts), &Params::default());
+        assert_eq!(sizes(&c), vec![63, 63, 63]);
+        let off = Params {
+            join_rows: false,
+            ..Params::default()
+        };
+        assert_eq!(run(&cloud(&pts), &off).len(), 21);
     }
 
     #[test]

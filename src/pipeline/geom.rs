@@ -243,6 +243,107 @@ pub fn components_adaptive(xy: &[[f64; 2]], r_min: f64, r_max: f64, k: usize) ->
     merge_groups(&mut parent, base)
 }
 
+/// Largest spread (m, standard deviation) across a component that still counts as one scan
+/// row: range noise plus a row's curvature over a fragment.
+const ROW_MAX_SPREAD_M: f64 = 0.02;
+/// ... or, for a fragment of two interleaved rows (two scanner heads), its spread over
+/// its length (a uniform bar of length L has standard deviation L/√12 along it).
+const ROW_MAX_RELATIVE_SPREAD: f64 = 0.25;
+/// Longest row fragment considered (m): longer single rows are lines in their own right.
+const ROW_MAX_LENGTH_M: f64 = 1.0;
+/// Largest angle between stacked row fragments (deg).
+const ROW_MAX_ANGLE_DEG: f64 = 15.0;
+
+/// Join stacked scan-row fragments: at far range a scanner samples the road in rows (one
+/// pulse index over consecutive scan lines) that are dense along the row and 0.3–0.6 m
+/// apart across it, so a painted bar crossed by several rows falls apart into thin
+/// parallel fragments. Two components that are each one row (spread across their axis ≤
+/// [`ROW_MAX_SPREAD_M`], length ≤ [`ROW_MAX_LENGTH_M`]), parallel within
+/// [`ROW_MAX_ANGLE_DEG`], side by side (each one's centre lies within the other's extent
+/// along the axis, so they overlap by at least half the shorter one) and at most
+/// `max_across` apart across the rows are one component. Collinear fragments (the next
+/// stripe along the same row, a dash after a gap) are never joined by this rule. Symmetric
+/// and order-independent; output as [`components`].
+pub fn join_row_fragments(xy: &[[f64; 2]], comps: Vec<Vec<usize>>, max_across: f64) -> Vec<Vec<usize>> {
+    struct Row {
+        comp: usize,
+        center: [f64; 2],
+        axis: [f64; 2],
+        half: f64,
+    }
+    let rows: Vec<Row> = comps
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| c.len() >= 3)
+        .filter_map(|(k, c)| {
+            let pts: Vec<[f64; 2]> = c.iter().map(|&i| xy[i]).collect();
+            let pca = Pca::of(&pts);
+            let spread = pca.var[1].max(0.0).sqrt();
+            if spread > ROW_MAX_SPREAD_M
+                && spread > ROW_MAX_RELATIVE_SPREAD * 2.0 * pca.var[0].max(0.0).sqrt() * 3f64.sqrt()
+            {
+                return None;
+            }
+            let (lo, hi) = pts
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+                    let u = (p[0] - pca.center[0]) * pca.axis[0] + (p[1] - pca.center[1]) * pca.axis[1];
+                    (lo.min(u), hi.max(u))
+                });
+            let len = hi - lo;
+            (len > 0.0 && len <= ROW_MAX_LENGTH_M).then(|| Row {
+                comp: k,
+                center: [
+                    pca.center[0] + 0.5 * (lo + hi) * pca.axis[0],
+                    pca.center[1] + 0.5 * (lo + hi) * pca.axis[1],
+                ],
+                axis: pca.axis,
+                half: 0.5 * len,
+            })
+        })
+        .collect();
+    if rows.len() < 2 || max_across <= 0.0 {
+        return comps;
+    }
+    let centers: Vec<[f64; 2]> = rows.iter().map(|r| r.center).collect();
+    let reach = max_across.max(ROW_MAX_LENGTH_M / 2.0);
+    let grid = GridIndex::new(&centers, reach);
+    let cos_max = ROW_MAX_ANGLE_DEG.to_radians().cos();
+    let mut parent: Vec<usize> = (0..comps.len()).collect();
+    for (a, ra) in rows.iter().enumerate() {
+        let key = (floor_i64(ra.center[0] / reach), floor_i64(ra.center[1] / reach));
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                let Some(sl) = grid.slice((key.0 + dx, key.1 + dy)) else {
+                    continue;
+                };
+                for &b in sl {
+                    let b = b as usize;
+                    if b <= a {
+                        continue;
+                    }
+                    let rb = &rows[b];
+                    if (ra.axis[0] * rb.axis[0] + ra.axis[1] * rb.axis[1]).abs() < cos_max {
+                        continue;
+                    }
+                    let d = [rb.center[0] - ra.center[0], rb.center[1] - ra.center[1]];
+                    // Along and across each fragment's own axis: both must see the other
+                    // beside it.
+                    let side_by_side = |r: &Row, other_half: f64| {
+                        let along = (d[0] * r.axis[0] + d[1] * r.axis[1]).abs();
+                        let across = (d[0] * r.axis[1] - d[1] * r.axis[0]).abs();
+                        along <= r.half.min(other_half) && across <= max_across
+                    };
+                    if side_by_side(ra, rb.half) && side_by_side(rb, ra.half) {
+                        union(&mut parent, ra.comp, rb.comp);
+                    }
+                }
+            }
+        }
+    }
+    merge_groups(&mut parent, comps)
+}
+
 /// Root of `a` in the union-find forest `parent` (with path halving). The union-find here is
 /// a few lines over plain index vectors, which no dependency of ours offers.
 pub fn find_root(parent: &mut [usize], mut a: usize) -> usize {
@@ -699,6 +800,47 @@ mod tests {
     }
 
     use super::*;
+
+    /// One scan row crossing a bar: `n` points 0.05 m apart from `start` along `dir`.
+    fn row(start: [f64; 2], dir: [f64; 2], n: usize) -> Vec<[f64; 2]> {
+        (0..n)
+            .map(|k| {
+                [
+                    start[0] + 0.05 * k as f64 * dir[0],
+                    start[1] + 0.05 * k as f64 * dir[1],
+                ]
+            })
+            .collect()
+    }
+
+    /// Rows 0.45 m apart crossing two stripes (0.45 m wide, 1.05 m apart along the rows):
+    /// each stripe's fragments join, the two stripes do not; a lone fragment at an angle
+    /// and a long row (a line, not a fragment) join nothing.
+    #[test]
+    fn stacked_row_fragments_join_and_collinear_ones_do_not() {
+        let mut xy = Vec::new();
+        let mut comps = Vec::new();
+        let mut add = |pts: Vec<[f64; 2]>| {
+            comps.push((xy.len()..xy.len() + pts.len()).collect::<Vec<usize>>());
+            xy.extend(pts);
+        };
+        for r in 0..5 {
+            let y = 0.45 * r as f64;
+            add(row([0.0, y], [1.0, 0.0], 9));
+            add(row([1.05, y], [1.0, 0.0], 9));
+        }
+        let d = [30f64.to_radians().cos(), 30f64.to_radians().sin()];
+        add(row([0.0, 2.7], d, 9));
+        add(row([-3.0, 1.0], [1.0, 0.0], 60));
+        let n = comps.len();
+        let joined = join_row_fragments(&xy, comps, 0.6);
+        assert_eq!(joined.len(), n - 8);
+        let first = joined.iter().find(|g| g.contains(&0)).unwrap();
+        assert_eq!(first.len(), 45, "five rows of the first stripe");
+        let second = joined.iter().find(|g| g.contains(&9)).unwrap();
+        assert_eq!(second.len(), 45);
+        assert!(joined.iter().any(|g| g.len() == 60));
+    }
 
     #[test]
     fn components_of_degenerate_inputs() {

@@ -15,7 +15,11 @@
 //!    asphalt where the window holds no paint at all.
 //! 3. *Cleanup* on 8-connected components: optional morphological closing/opening
 //!    (`close_radius_px`, `open_radius_px`, off by default because a 3×3 closing already
-//!    bridges the 0.1 m gap of a double line); components smaller than
+//!    bridges the 0.1 m gap of a double line); foreground pixels separated only by
+//!    unobserved pixels (no point within the IDW radius), at most `bridge_nodata_m` apart
+//!    along a row or column, are joined first, so that a far crosswalk stripe crossed by
+//!    scan rows 0.3–0.5 m apart is judged as one stripe, not as a stack of small blobs
+//!    (the filled pixels hold no points and add no marking point); components smaller than
 //!    `min_component_area_m2` are dropped (speckle, thin crack-sealant streaks that
 //!    survive smoothing); compact bright blobs — short (`blob_max_length_m`), not
 //!    elongated (`blob_max_elongation`) and solidly filled (`blob_min_fill`) — are dropped
@@ -38,7 +42,7 @@
 //!
 //! **Parameters** ([`Params`]): `window_radius_px` s = 12, `factor` t = 1.27 (Yao 2019
 //! best (s, t) ≈ (10–12, 1.27–1.29)), `gaussian_sigma_px` 1.0, `min_contrast` 1.25,
-//! `min_component_area_m2` 0.03, `blob_max_length_m` 1.2, `blob_max_elongation` 2.0,
+//! `bridge_nodata_m` 0.3, `min_component_area_m2` 0.03, `blob_max_length_m` 1.2, `blob_max_elongation` 2.0,
 //! `blob_min_fill` 0.7, `point_contrast_fraction` 0.3, `flat_cell_m` 0.2,
 //! `flat_noise_factor` 4 (0 = off), `flat_min_spread_m` 0.06.
 //!
@@ -90,6 +94,11 @@ pub struct Params {
     pub close_radius_px: u32,
     /// Morphological opening radius (pixels, square element; 0 = off).
     pub open_radius_px: u32,
+    /// Foreground pixels separated only by unobserved (no-data) pixels, at most this far
+    /// apart along a raster row or column, are one component (m; 0 = off): far-range scan
+    /// rows cross a crosswalk stripe 0.3–0.5 m apart, and the stripe must be judged whole
+    /// by the size and blob rules, not as a stack of small fragments. Default 0.3.
+    pub bridge_nodata_m: f64,
     /// Components smaller than this are dropped (m²).
     pub min_component_area_m2: f64,
     /// Blob rejection: components shorter than this …
@@ -123,6 +132,7 @@ impl Default for Params {
             weak_min_contrast: 1.12,
             close_radius_px: 0,
             open_radius_px: 0,
+            bridge_nodata_m: 0.3,
             min_component_area_m2: 0.03,
             blob_max_length_m: 1.2,
             blob_max_elongation: 2.0,
@@ -168,6 +178,7 @@ impl Params {
         if self.open_radius_px > 10 {
             return Err(format!("open_radius_px: at most 10, got {}", self.open_radius_px));
         }
+        check_range("bridge_nodata_m", self.bridge_nodata_m, 0.0, 2.0)?;
         check_range("min_component_area_m2", self.min_component_area_m2, 0.0, 100.0)?;
         check_range("blob_max_length_m", self.blob_max_length_m, 0.0, 10.0)?;
         check_range("blob_max_elongation", self.blob_max_elongation, 1.0, 100.0)?;
@@ -589,6 +600,10 @@ pub fn segment(img: &Raster<f32>, p: &Params) -> Segmentation {
     if p.open_radius_px > 0 {
         mask = dilate(&erode(&mask, p.open_radius_px), p.open_radius_px);
     }
+    let gap_px = (p.bridge_nodata_m / img.cell_m).round() as usize;
+    if gap_px > 0 {
+        bridge_nodata(&mut mask, img, gap_px);
+    }
     let (mut labels, comps) = label(&mask);
     let px_area = img.cell_m * img.cell_m;
     let mut keep = vec![0u32; comps.len() + 1];
@@ -612,13 +627,16 @@ pub fn segment(img: &Raster<f32>, p: &Params) -> Segmentation {
     for (k, l) in labels.iter_mut().enumerate() {
         *l = keep[*l as usize];
         mask.data[k] = u8::from(*l != 0);
-        if *l != 0 {
+        if *l != 0 && smooth.data[k].is_finite() {
             values[*l as usize - 1].push(smooth.data[k]);
         }
     }
     let levels = values
         .into_iter()
         .map(|mut v| {
+            if v.is_empty() {
+                return f32::INFINITY;
+            }
             let mid = v.len() / 2;
             *v.select_nth_unstable_by(mid, f32::total_cmp).1
         })
@@ -628,6 +646,62 @@ pub fn segment(img: &Raster<f32>, p: &Params) -> Segmentation {
         labels,
         levels,
         dropped: (small, blob),
+    }
+}
+
+/// Fill runs of at most `gap_px` unobserved pixels (NaN in `img`, background in `mask`)
+/// that lie between two foreground pixels of one raster row or column. The filled pixels
+/// hold no point, so no marking point comes from them; they only make the sparse scan rows
+/// of one painted object one component for the cleanup rules. A run that reaches an
+/// observed background pixel is never filled: asphalt seen between two marks keeps them
+/// apart. Written here because no image crate of ours labels through no-data.
+fn bridge_nodata(mask: &mut Raster<u8>, img: &Raster<f32>, gap_px: usize) {
+    let (w, h) = (mask.width, mask.height);
+    let unobserved = |k: usize| img.data[k].is_nan();
+    let mut fill = vec![false; w * h];
+    // One line of the raster: `at(i)` is the flat index of its i-th pixel.
+    let mut scan = |len: usize, at: &dyn Fn(usize) -> usize| {
+        let mut last_fg: Option<usize> = None;
+        let mut i = 0;
+        while i < len {
+            let k = at(i);
+            if mask.data[k] != 0 {
+                last_fg = Some(i);
+                i += 1;
+                continue;
+            }
+            if !unobserved(k) {
+                last_fg = None;
+                i += 1;
+                continue;
+            }
+            // A run of unobserved pixels from i.
+            let start = i;
+            while i < len && mask.data[at(i)] == 0 && unobserved(at(i)) {
+                i += 1;
+            }
+            if last_fg == Some(start.wrapping_sub(1))
+                && i < len
+                && mask.data[at(i)] != 0
+                && i - start <= gap_px
+            {
+                for j in start..i {
+                    fill[at(j)] = true;
+                }
+            }
+            last_fg = None;
+        }
+    };
+    for y in 0..h {
+        scan(w, &|i| y * w + i);
+    }
+    for x in 0..w {
+        scan(h, &|i| i * w + x);
+    }
+    for (m, f) in mask.data.iter_mut().zip(&fill) {
+        if *f {
+            *m = 1;
+        }
     }
 }
 
@@ -973,6 +1047,41 @@ mod tests {
         assert_eq!(*seg.mask.get(100, 21), 1);
         assert_eq!(*seg.mask.get(100, 60), 0);
         assert_eq!(*seg.mask.get(150, 80), 0);
+    }
+
+    /// Far range: the data come in rows (along x) 0.45 m apart with 0.15 m of no-data
+    /// between them; crosswalk stripes 0.45 m wide run across the rows (along y), 1.05 m
+    /// apart. Each stripe is one component (its row pieces, 0.45 × 0.3 m each, would be
+    /// dropped as small), and neighbouring stripes stay apart: asphalt was seen between them.
+    #[test]
+    fn stripes_crossed_by_sparse_rows_are_one_component_each() {
+        let stripe = |x: usize| (20..29).contains(&x) || (41..50).contains(&x);
+        let img = raster(80, 90, |x, y| {
+            if y % 9 >= 6 || !(9..81).contains(&y) {
+                f32::NAN
+            } else if stripe(x) {
+                3.0
+            } else {
+                1.0
+            }
+        });
+        let seg = segment(&img, &Params::default());
+        let l1 = seg.labels[10 * 80 + 24];
+        assert_ne!(l1, 0);
+        for y in (9..78).step_by(9) {
+            assert_eq!(seg.labels[y * 80 + 24], l1, "row {y} of the first stripe");
+        }
+        let l2 = seg.labels[10 * 80 + 45];
+        assert_ne!(l2, 0);
+        assert_ne!(l1, l2, "two stripes");
+        assert_eq!(seg.labels[10 * 80 + 35], 0, "asphalt between the stripes");
+        // Without the bridging the 0.0135 m² pieces are dropped as small.
+        let off = Params {
+            bridge_nodata_m: 0.0,
+            ..Params::default()
+        };
+        let seg = segment(&img, &off);
+        assert!(seg.labels.iter().all(|&l| l == 0));
     }
 
     #[test]
