@@ -86,11 +86,12 @@ fn semantickitti_marking_points_precision_and_recall() {
     let precision = tp as f64 / ext.max(1) as f64;
     let recall = tp as f64 / lab.max(1) as f64;
     eprintln!("semantickitti all: precision {precision:.3}, recall {recall:.3}");
-    // Measured 2026-11-22 (release): precision 0.104, recall 0.388 over the three scans.
+    // Measured 2026-12-03 (release): precision 0.125, recall 0.459 over the three scans
+    // (0.104 / 0.388 before the no-data bridging of the threshold stage joined ring pieces).
     // A single ring scan with per-laser gains is far from what the pipeline is built for;
     // these floors only keep it from getting worse.
-    assert!(precision >= 0.08, "precision {precision:.3} below 0.08");
-    assert!(recall >= 0.32, "recall {recall:.3} below 0.32");
+    assert!(precision >= 0.10, "precision {precision:.3} below 0.10");
+    assert!(recall >= 0.40, "recall {recall:.3} below 0.40");
 }
 
 /// A stand-in trajectory for a tile that has none: a straight drive along the principal axis
