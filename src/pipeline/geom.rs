@@ -251,6 +251,10 @@ const ROW_MAX_SPREAD_M: f64 = 0.02;
 const ROW_MAX_RELATIVE_SPREAD: f64 = 0.25;
 /// Longest row fragment considered (m): longer single rows are lines in their own right.
 const ROW_MAX_LENGTH_M: f64 = 1.0;
+/// Stacked fragments may be shifted along their rows by at most this share of their mean
+/// length (0.75: they still overlap by a quarter): rows that cross a bar obliquely (the
+/// ±35° planes of a butterfly pair of heads) are shifted by row spacing × sin(angle).
+const ROW_MIN_OVERLAP_SHIFT: f64 = 0.75;
 /// Largest angle between stacked row fragments (deg).
 const ROW_MAX_ANGLE_DEG: f64 = 15.0;
 
@@ -259,8 +263,8 @@ const ROW_MAX_ANGLE_DEG: f64 = 15.0;
 /// apart across it, so a painted bar crossed by several rows falls apart into thin
 /// parallel fragments. Two components that are each one row (spread across their axis ≤
 /// [`ROW_MAX_SPREAD_M`], length ≤ [`ROW_MAX_LENGTH_M`]), parallel within
-/// [`ROW_MAX_ANGLE_DEG`], side by side (each one's centre lies within the other's extent
-/// along the axis, so they overlap by at least half the shorter one) and at most
+/// [`ROW_MAX_ANGLE_DEG`], side by side (overlapping along their rows by at least a quarter
+/// of their mean length, see [`ROW_MIN_OVERLAP_SHIFT`]) and at most
 /// `max_across` apart across the rows are one component. Collinear fragments (the next
 /// stripe along the same row, a dash after a gap) are never joined by this rule. Symmetric
 /// and order-independent; output as [`components`].
@@ -332,7 +336,7 @@ pub fn join_row_fragments(xy: &[[f64; 2]], comps: Vec<Vec<usize>>, max_across: f
                     let side_by_side = |r: &Row, other_half: f64| {
                         let along = (d[0] * r.axis[0] + d[1] * r.axis[1]).abs();
                         let across = (d[0] * r.axis[1] - d[1] * r.axis[0]).abs();
-                        along <= r.half.min(other_half) && across <= max_across
+                        along <= ROW_MIN_OVERLAP_SHIFT * (r.half + other_half) && across <= max_across
                     };
                     if side_by_side(ra, rb.half) && side_by_side(rb, ra.half) {
                         union(&mut parent, ra.comp, rb.comp);
