@@ -69,8 +69,9 @@ pub struct Params {
     /// Longer gaps, up to this (m), are bridged too when both solid pieces beside the gap
     /// are at least as long as it: a line painted solid on both sides of a gap shorter than
     /// either side was worn or hidden there, not broken (a real break, at a junction or
-    /// where the line turns dashed, has short or no solid pieces on one side). 0 turns it
-    /// off. Default 12.
+    /// where the line turns dashed, has short or no solid pieces on one side); and between
+    /// any two far-range pieces whose width the points do not resolve (sparse scan rows
+    /// break such a line into short pieces). 0 turns it off. Default 12.
     pub bridge_long_gap_m: f64,
     /// Dashes of a regular dashed lane line seen only in part (worn, shadowed, sparse far
     /// scan lines) get the painted extent of the line's design: its dash length, period and
@@ -473,6 +474,19 @@ fn bridge_limit(la: f64, lb: f64, params: &Params) -> f64 {
         .max(params.bridge_long_gap_m.min(la.min(lb)))
 }
 
+/// The longest gap bridged between solid pieces `a` and `b` of one solid lane line:
+/// [`bridge_limit`] of their lengths, or `bridge_long_gap_m` whatever their lengths when
+/// both are undersampled (far range, fewer than about two points across): there the scan
+/// rows drift on and off a 0.15 m line and break it into short pieces, so short pieces
+/// say nothing about a real break.
+fn gap_limit(a: &Piece, b: &Piece, params: &Params) -> f64 {
+    if a.undersampled.is_some() && b.undersampled.is_some() {
+        params.bridge_solid_gap_m.max(params.bridge_long_gap_m)
+    } else {
+        bridge_limit(a.marking.length_m, b.marking.length_m, params)
+    }
+}
+
 /// Station (distance along `lane` from its first vertex) of the point of `lane` nearest `p`.
 fn station_on(lane: &[[f64; 2]], p: [f64; 2]) -> f64 {
     let d = |p: [f64; 2], q: [f64; 2]| (p[0] - q[0]).hypot(p[1] - q[1]);
@@ -771,7 +785,7 @@ pub fn assemble(pieces: Vec<Piece>, traj_abs: &Trajectory, params: &Params) -> (
                 if a.marking.class != MarkingClass::SolidLine || b.marking.class != MarkingClass::SolidLine {
                     continue;
                 }
-                let max_gap = bridge_limit(a.marking.length_m, b.marking.length_m, params);
+                let max_gap = gap_limit(a, b, params);
                 if let Some(bridge) = bridge(a, b, &l.line, max_gap) {
                     bridges.push(bridge);
                 }
@@ -949,6 +963,15 @@ mod tests {
             ..Params::default()
         };
         assert_eq!(bridge_limit(30.0, 50.0, &off), 4.0);
+        // Far-range pieces (undersampled) are short because the scan rows drift off the
+        // line, not because it is broken: long gaps between them are bridged.
+        let far = |x0: f64, x1: f64| Piece {
+            undersampled: Some(0.4),
+            ..solid(x0, x1)
+        };
+        assert_eq!(gap_limit(&far(0.0, 1.0), &far(9.0, 10.0), &p), 12.0);
+        assert_eq!(gap_limit(&far(0.0, 1.0), &solid(9.0, 10.0), &p), 4.0);
+        assert_eq!(gap_limit(&solid(0.0, 30.0), &solid(40.0, 90.0), &p), 12.0);
         let bad = Params {
             bridge_long_gap_m: -1.0,
             ..Params::default()
