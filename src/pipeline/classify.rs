@@ -169,6 +169,10 @@ impl Params {
 /// narrow slices.
 pub const LINE_WIDTH_SLACK_M: f64 = 0.15;
 
+/// Narrowest painted line (m; MUTCD 4 in): the outline width of a line is not taken
+/// below this from the interquartile range of its points (see `LineGeometry::paint_width_m`).
+pub const MIN_PAINT_WIDTH_M: f64 = 0.10;
+
 /// Share of a line piece's cross-sections that may be wider than its typical one (see
 /// `line_max_width_ratio`) before the piece is no line.
 pub const WIDE_SLICE_SHARE: f64 = 0.1;
@@ -216,6 +220,11 @@ pub struct LineGeometry {
     pub stations: Vec<[f64; 2]>,
     /// Painted width (robust extent of the residuals about the centreline).
     pub width_m: f64,
+    /// Width of the painted outline: `width_m`, or twice the interquartile range of the
+    /// residuals when that is smaller (paint points spread uniformly across a line, so the
+    /// IQR is half its width whatever a few percent of strays beside it do to the trimmed
+    /// extent). The rules judge by `width_m`; only the outline uses this.
+    pub paint_width_m: f64,
     /// Length along the centreline.
     pub length_m: f64,
     /// Largest distance of the centreline from its chord: > a few cm means curved.
@@ -465,10 +474,19 @@ fn line_geometry(pts: &[[f64; 2]], refl: &RefLine, p: &Params) -> Option<LineGeo
         .iter()
         .map(|q| ((q[0] - a[0]) * (b[1] - a[1]) - (q[1] - a[1]) * (b[0] - a[0])).abs() / chord)
         .fold(0.0, f64::max);
+    let paint_width = if resid.len() >= 40 {
+        let iqr = geom::quantile_sorted(&resid, 0.75) - geom::quantile_sorted(&resid, 0.25);
+        // Never below the narrowest painted line: a far line crossed by two scan rows
+        // has an IQR of about nothing.
+        width.min((2.0 * iqr * cosang).max(MIN_PAINT_WIDTH_M))
+    } else {
+        width
+    };
     Some(LineGeometry {
         centerline,
         stations,
         width_m: width,
+        paint_width_m: paint_width,
         length_m: length,
         sagitta_m: sagitta,
     })
@@ -981,5 +999,31 @@ mod tests {
         // The same mark in the middle of the line is no end: not a line.
         let middle = paint(20.0, |x, y| y.abs() <= 0.075 || (9.5..10.5).contains(&x));
         assert!(line_geometry(&middle, &r, &p).is_none_or(|g| g.width_m > 0.5));
+    }
+
+    /// A 30 m line 0.15 m wide with 5 % of its points strewn up to 0.25 m beside it
+    /// (grit, the blurred edge of a worn patch): the rules see the trimmed extent, the
+    /// outline gets twice the interquartile range, the paint's own width.
+    #[test]
+    fn strays_beside_a_line_do_not_widen_its_outline() {
+        let (r, p) = (refl(), Params::default());
+        let mut line = paint(30.0, |_, y| y.abs() <= 0.075);
+        let n = line.len();
+        for k in 0..n / 20 {
+            let x = 30.0 * k as f64 / (n / 20) as f64;
+            let side = if k % 2 == 0 { 1.0 } else { -1.0 };
+            line.push([x, 2.0 + side * (0.1 + 0.15 * ((k * 7 % 11) as f64 / 10.0))]);
+        }
+        let g = line_geometry(&line, &r, &p).expect("still a line");
+        assert!(g.width_m > 0.2, "trimmed extent {}", g.width_m);
+        assert!(
+            (g.paint_width_m - 0.15).abs() < 0.03,
+            "outline width {}",
+            g.paint_width_m
+        );
+        // Without strays both agree.
+        let clean = paint(30.0, |_, y| y.abs() <= 0.075);
+        let g = line_geometry(&clean, &r, &p).expect("a line");
+        assert!((g.paint_width_m - g.width_m).abs() < 0.02);
     }
 }

@@ -195,8 +195,8 @@ pub fn outlines(cloud: &PointCloud, candidates: &[Candidate], params: &Params) -
                     let cl: Vec<[f64; 2]> = l.centerline.iter().map(|&p| abs(p)).collect();
                     if c.class == MarkingClass::SolidLine || l.sagitta_m > params.curved_min_sagitta_m {
                         let simple = geom::simplify(&l.centerline, params.outline_simplify_m / 2.0);
-                        let ring = outline::buffered_line_simple(&simple, l.width_m / 2.0);
-                        (ring, l.length_m, l.width_m, heading_deg(chord), Some(cl))
+                        let ring = outline::buffered_line_simple(&simple, l.paint_width_m / 2.0);
+                        (ring, l.length_m, l.paint_width_m, heading_deg(chord), Some(cl))
                     } else {
                         (
                             s.corners().to_vec(),
