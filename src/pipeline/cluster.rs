@@ -177,22 +177,15 @@ pub fn run(cloud: &PointCloud, params: &Params) -> Vec<Cluster> {
     // Stacked scan-row fragments of one far bar are joined after the splitting, whose
     // lateral-valley rule would cut them apart again at the empty gaps between the rows.
     let mut groups: Vec<(Vec<usize>, bool)> = if params.join_rows {
-        let mut split_of = vec![false; xy.len()];
-        for (g, s) in &parts {
-            for &i in g {
-                split_of[i] = *s;
-            }
-        }
-        let joined = geom::join_row_fragments(
-            &xy,
-            parts.into_iter().map(|(g, _)| g).collect(),
-            params.max_radius_m,
-        );
-        joined
+        let (idx, was_split): (Vec<Vec<usize>>, Vec<bool>) = parts.into_iter().unzip();
+        geom::join_row_fragments(&xy, &idx, params.max_radius_m)
             .into_iter()
-            .map(|g| {
-                let s = g.iter().any(|&i| split_of[i]);
-                (g, s)
+            .map(|members| {
+                let split = members.iter().any(|&c| was_split[c]);
+                (
+                    members.into_iter().flat_map(|c| idx[c].iter().copied()).collect(),
+                    split,
+                )
             })
             .collect()
     } else {

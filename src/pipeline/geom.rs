@@ -75,6 +75,17 @@ impl GridIndex {
             .map(|&(a, b)| &self.order[a as usize..b as usize])
     }
 
+    /// Indices of the points in the cells within `rings` cells of the cell holding `p`
+    /// (a (2·rings + 1)² block, column by column, each cell in index order).
+    pub fn around(&self, p: [f64; 2], rings: i64) -> impl Iterator<Item = usize> + '_ {
+        let (kx, ky) = (floor_i64(p[0] / self.cell), floor_i64(p[1] / self.cell));
+        (-rings..=rings)
+            .flat_map(move |dx| (-rings..=rings).map(move |dy| (kx + dx, ky + dy)))
+            .filter_map(|k| self.slice(k))
+            .flatten()
+            .map(|&i| i as usize)
+    }
+
     /// Distance to the nearest other point within `max_r` (None when there is none).
     pub fn nearest_other(&self, xy: &[[f64; 2]], i: usize, max_r: f64) -> Option<f64> {
         let p = xy[i];
@@ -192,19 +203,11 @@ pub fn components_adaptive(xy: &[[f64; 2]], r_min: f64, r_max: f64, k: usize) ->
             if grid.slice(key).is_some_and(|s| s.len() > k) {
                 return r_min;
             }
-            let mut d: Vec<f64> = Vec::new();
-            for dx in -reach..=reach {
-                for dy in -reach..=reach {
-                    if let Some(s) = grid.slice((key.0 + dx, key.1 + dy)) {
-                        for &j in s {
-                            if j as usize != i {
-                                let q = xy[j as usize];
-                                d.push((q[0] - p[0]).hypot(q[1] - p[1]));
-                            }
-                        }
-                    }
-                }
-            }
+            let mut d: Vec<f64> = grid
+                .around(p, reach)
+                .filter(|&j| j != i)
+                .map(|j| (xy[j][0] - p[0]).hypot(xy[j][1] - p[1]))
+                .collect();
             if d.len() < k {
                 return r_max;
             }
@@ -221,22 +224,11 @@ pub fn components_adaptive(xy: &[[f64; 2]], r_min: f64, r_max: f64, k: usize) ->
     let mut parent: Vec<usize> = (0..base.len()).collect();
     for (a, &i) in sparse.iter().enumerate() {
         let p = xy[i];
-        let key = (floor_i64(p[0] / r_max), floor_i64(p[1] / r_max));
-        for dx in -1..=1 {
-            for dy in -1..=1 {
-                let Some(s) = sgrid.slice((key.0 + dx, key.1 + dy)) else {
-                    continue;
-                };
-                for &b in s {
-                    let j = sparse[b as usize];
-                    if b as usize <= a {
-                        continue;
-                    }
-                    let q = xy[j];
-                    if (q[0] - p[0]).hypot(q[1] - p[1]) <= radius[i].min(radius[j]) {
-                        union(&mut parent, label[i], label[j]);
-                    }
-                }
+        for b in sgrid.around(p, 1).filter(|&b| b > a) {
+            let j = sparse[b];
+            let q = xy[j];
+            if (q[0] - p[0]).hypot(q[1] - p[1]) <= radius[i].min(radius[j]) {
+                union(&mut parent, label[i], label[j]);
             }
         }
     }
@@ -246,8 +238,8 @@ pub fn components_adaptive(xy: &[[f64; 2]], r_min: f64, r_max: f64, k: usize) ->
 /// Largest spread (m, standard deviation) across a component that still counts as one scan
 /// row: range noise plus a row's curvature over a fragment.
 const ROW_MAX_SPREAD_M: f64 = 0.02;
-/// ... or, for a fragment of two interleaved rows (two scanner heads), its spread over
-/// its length (a uniform bar of length L has standard deviation L/√12 along it).
+/// ... or, for a fragment of two interleaved rows (two scanner heads), this share of its
+/// length.
 const ROW_MAX_RELATIVE_SPREAD: f64 = 0.25;
 /// Longest row fragment considered (m): longer single rows are lines in their own right.
 const ROW_MAX_LENGTH_M: f64 = 1.0;
@@ -261,18 +253,19 @@ const ROW_MAX_ANGLE_DEG: f64 = 15.0;
 /// Join stacked scan-row fragments: at far range a scanner samples the road in rows (one
 /// pulse index over consecutive scan lines) that are dense along the row and 0.3–0.6 m
 /// apart across it, so a painted bar crossed by several rows falls apart into thin
-/// parallel fragments. Two components that are each one row (spread across their axis ≤
-/// [`ROW_MAX_SPREAD_M`], length ≤ [`ROW_MAX_LENGTH_M`]), parallel within
-/// [`ROW_MAX_ANGLE_DEG`], side by side (overlapping along their rows by at least a quarter
-/// of their mean length, see [`ROW_MIN_OVERLAP_SHIFT`]) and at most
-/// `max_across` apart across the rows are one component. Collinear fragments (the next
-/// stripe along the same row, a dash after a gap) are never joined by this rule. Symmetric
-/// and order-independent; output as [`components`].
-pub fn join_row_fragments(xy: &[[f64; 2]], comps: Vec<Vec<usize>>, max_across: f64) -> Vec<Vec<usize>> {
+/// parallel fragments. Two components (index groups into `xy`) that are each one row
+/// (spread across their axis ≤ [`ROW_MAX_SPREAD_M`] or [`ROW_MAX_RELATIVE_SPREAD`] of
+/// their length, length ≤ [`ROW_MAX_LENGTH_M`]), parallel within [`ROW_MAX_ANGLE_DEG`],
+/// side by side (overlapping along their rows by at least a quarter of their mean length,
+/// see [`ROW_MIN_OVERLAP_SHIFT`]) and at most `max_across` apart across the rows are
+/// joined. Collinear fragments (the next stripe along the same row, a dash after a gap)
+/// are never joined by this rule. Returns groups of indices into `comps`, each sorted,
+/// ordered by their first; symmetric and independent of the order of `comps`' members.
+pub fn join_row_fragments(xy: &[[f64; 2]], comps: &[Vec<usize>], max_across: f64) -> Vec<Vec<usize>> {
+    /// A one-row fragment: its principal frame centred on the middle of its extent.
     struct Row {
         comp: usize,
-        center: [f64; 2],
-        axis: [f64; 2],
+        frame: Pca,
         half: f64,
     }
     let rows: Vec<Row> = comps
@@ -282,70 +275,44 @@ pub fn join_row_fragments(xy: &[[f64; 2]], comps: Vec<Vec<usize>>, max_across: f
         .filter_map(|(k, c)| {
             let pts: Vec<[f64; 2]> = c.iter().map(|&i| xy[i]).collect();
             let pca = Pca::of(&pts);
-            let spread = pca.var[1].max(0.0).sqrt();
-            if spread > ROW_MAX_SPREAD_M
-                && spread > ROW_MAX_RELATIVE_SPREAD * 2.0 * pca.var[0].max(0.0).sqrt() * 3f64.sqrt()
-            {
-                return None;
-            }
             let (lo, hi) = pts
                 .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
-                    let u = (p[0] - pca.center[0]) * pca.axis[0] + (p[1] - pca.center[1]) * pca.axis[1];
+                .map(|&p| pca.to_frame(p)[0])
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), u| {
                     (lo.min(u), hi.max(u))
                 });
             let len = hi - lo;
-            (len > 0.0 && len <= ROW_MAX_LENGTH_M).then(|| Row {
+            let one_row = pca.var[1].sqrt() <= ROW_MAX_SPREAD_M.max(ROW_MAX_RELATIVE_SPREAD * len);
+            (one_row && len > 0.0 && len <= ROW_MAX_LENGTH_M).then(|| Row {
                 comp: k,
-                center: [
-                    pca.center[0] + 0.5 * (lo + hi) * pca.axis[0],
-                    pca.center[1] + 0.5 * (lo + hi) * pca.axis[1],
-                ],
-                axis: pca.axis,
+                frame: Pca {
+                    center: pca.from_frame([0.5 * (lo + hi), 0.0]),
+                    ..pca
+                },
                 half: 0.5 * len,
             })
         })
         .collect();
-    if rows.len() < 2 || max_across <= 0.0 {
-        return comps;
-    }
-    let centers: Vec<[f64; 2]> = rows.iter().map(|r| r.center).collect();
-    let reach = max_across.max(ROW_MAX_LENGTH_M / 2.0);
-    let grid = GridIndex::new(&centers, reach);
-    let cos_max = ROW_MAX_ANGLE_DEG.to_radians().cos();
     let mut parent: Vec<usize> = (0..comps.len()).collect();
+    let centers: Vec<[f64; 2]> = rows.iter().map(|r| r.frame.center).collect();
+    let grid = GridIndex::new(&centers, max_across.max(ROW_MAX_LENGTH_M / 2.0));
+    // Each must see the other beside it, in its own frame.
+    let beside = |r: &Row, o: &Row| {
+        let [along, across] = r.frame.to_frame(o.frame.center);
+        along.abs() <= ROW_MIN_OVERLAP_SHIFT * (r.half + o.half) && across.abs() <= max_across
+    };
     for (a, ra) in rows.iter().enumerate() {
-        let key = (floor_i64(ra.center[0] / reach), floor_i64(ra.center[1] / reach));
-        for dx in -1..=1 {
-            for dy in -1..=1 {
-                let Some(sl) = grid.slice((key.0 + dx, key.1 + dy)) else {
-                    continue;
-                };
-                for &b in sl {
-                    let b = b as usize;
-                    if b <= a {
-                        continue;
-                    }
-                    let rb = &rows[b];
-                    if (ra.axis[0] * rb.axis[0] + ra.axis[1] * rb.axis[1]).abs() < cos_max {
-                        continue;
-                    }
-                    let d = [rb.center[0] - ra.center[0], rb.center[1] - ra.center[1]];
-                    // Along and across each fragment's own axis: both must see the other
-                    // beside it.
-                    let side_by_side = |r: &Row, other_half: f64| {
-                        let along = (d[0] * r.axis[0] + d[1] * r.axis[1]).abs();
-                        let across = (d[0] * r.axis[1] - d[1] * r.axis[0]).abs();
-                        along <= ROW_MIN_OVERLAP_SHIFT * (r.half + other_half) && across <= max_across
-                    };
-                    if side_by_side(ra, rb.half) && side_by_side(rb, ra.half) {
-                        union(&mut parent, ra.comp, rb.comp);
-                    }
-                }
+        for b in grid.around(ra.frame.center, 1).filter(|&b| b > a) {
+            let rb = &rows[b];
+            if acute_angle_deg(ra.frame.axis, rb.frame.axis) <= ROW_MAX_ANGLE_DEG
+                && beside(ra, rb)
+                && beside(rb, ra)
+            {
+                union(&mut parent, ra.comp, rb.comp);
             }
         }
     }
-    merge_groups(&mut parent, comps)
+    merge_groups(&mut parent, (0..comps.len()).map(|c| [c]))
 }
 
 /// Root of `a` in the union-find forest `parent` (with path halving). The union-find here is
@@ -837,7 +804,10 @@ mod tests {
         add(row([0.0, 2.7], d, 9));
         add(row([-3.0, 1.0], [1.0, 0.0], 60));
         let n = comps.len();
-        let joined = join_row_fragments(&xy, comps, 0.6);
+        let joined: Vec<Vec<usize>> = join_row_fragments(&xy, &comps, 0.6)
+            .into_iter()
+            .map(|g| g.iter().flat_map(|&c| comps[c].iter().copied()).collect())
+            .collect();
         assert_eq!(joined.len(), n - 8);
         let first = joined.iter().find(|g| g.contains(&0)).unwrap();
         assert_eq!(first.len(), 45, "five rows of the first stripe");

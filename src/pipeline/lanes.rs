@@ -21,8 +21,9 @@
 //!    across the trajectory during a lane change are followed) within
 //!    `lateral_tolerance_m + lateral_tolerance_per_m × gap`, their directions differ ≤
 //!    `max_angle_deg` (plus, across gaps up to 3 m, the direction uncertainty of short
-//!    pieces: atan(0.05 m / length) each, so a far line's 1 m fragments chain), and their widths are similar (≥ `min_width_similarity`; lengths are
-//!    not compared, so dashes and solid pieces join). Links are made between mutual best
+//!    pieces: atan(0.05 m / length) each, so a far line's 1 m fragments chain), and
+//!    their widths are similar (≥ `min_width_similarity`; lengths are not compared, so
+//!    dashes and solid pieces join). Links are made between mutual best
 //!    matches (cost = offset mismatch / tolerance + gap / 2·max_gap), so the result does not
 //!    depend on a seed cluster and growth runs in both directions at once. Two rounds: the
 //!    second links whole chains, with slopes estimated over their last 15 m.
@@ -197,9 +198,6 @@ struct Seg {
     o1: f64,
     slope0: f64,
     slope1: f64,
-    /// Along-track length the end slopes were fitted over (m): a short piece's direction
-    /// is uncertain by about [`SLOPE_NOISE_M`] over it.
-    span: f64,
     width: f64,
 }
 
@@ -211,6 +209,14 @@ const SLOPE_NOISE_M: f64 = 0.05;
 /// Gaps (m) up to which the direction slack of short pieces applies in full; beyond, it
 /// shrinks in proportion.
 const SLACK_GAP_M: f64 = 3.0;
+
+impl Seg {
+    /// Along-track length its end slopes are fitted over (m; ≤ 15 m, see `seg_of`): a
+    /// short piece's direction is uncertain by about [`SLOPE_NOISE_M`] over it.
+    fn span(&self) -> f64 {
+        (self.s1 - self.s0).clamp(0.1, 15.0)
+    }
+}
 
 /// Least-squares slope do/ds of samples with s within `span` of the start or end.
 fn end_slope(so: &[[f64; 2]], at_end: bool, span: f64) -> f64 {
@@ -256,7 +262,6 @@ fn seg_of(items: &[Item], members: Vec<usize>) -> Seg {
         o1: so[so.len() - 1][1],
         slope0: end_slope(&so, false, 15.0),
         slope1: end_slope(&so, true, 15.0),
-        span: (so[so.len() - 1][0] - so[0][0]).clamp(0.1, 15.0),
         width: w,
         members,
     }
@@ -293,7 +298,7 @@ fn link(segs: &[Seg], p: &Params, barriers: &[[f64; 4]]) -> Vec<Vec<usize>> {
             }
             // ... but only across short gaps: two short pieces far apart are weak evidence
             // of one line whatever their directions.
-            let slack = ((SLOPE_NOISE_M / sa.span).atan() + (SLOPE_NOISE_M / sb.span).atan())
+            let slack = ((SLOPE_NOISE_M / sa.span()).atan() + (SLOPE_NOISE_M / sb.span()).atan())
                 * (SLACK_GAP_M / g.max(1e-6)).min(1.0);
             if (sa.slope1.atan() - sb.slope0.atan()).abs() > max_tan + slack {
                 continue;

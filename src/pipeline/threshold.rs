@@ -42,9 +42,9 @@
 //!
 //! **Parameters** ([`Params`]): `window_radius_px` s = 12, `factor` t = 1.27 (Yao 2019
 //! best (s, t) ≈ (10–12, 1.27–1.29)), `gaussian_sigma_px` 1.0, `min_contrast` 1.25,
-//! `bridge_nodata_m` 0.3, `min_component_area_m2` 0.03, `blob_max_length_m` 1.2, `blob_max_elongation` 2.0,
-//! `blob_min_fill` 0.7, `point_contrast_fraction` 0.3, `flat_cell_m` 0.2,
-//! `flat_noise_factor` 4 (0 = off), `flat_min_spread_m` 0.06.
+//! `bridge_nodata_m` 0.3, `min_component_area_m2` 0.03, `blob_max_length_m` 1.2,
+//! `blob_max_elongation` 2.0, `blob_min_fill` 0.7, `point_contrast_fraction` 0.3,
+//! `flat_cell_m` 0.2, `flat_noise_factor` 4 (0 = off), `flat_min_spread_m` 0.06.
 //!
 //! **Reference.** Bradley D., Roth G. (2007) Adaptive thresholding using the integral image,
 //! J. Graphics Tools 12(2); Yao et al. (2019, 2021); Pan et al. (2019) ISPRS J.
@@ -627,6 +627,9 @@ pub fn segment(img: &Raster<f32>, p: &Params) -> Segmentation {
     for (k, l) in labels.iter_mut().enumerate() {
         *l = keep[*l as usize];
         mask.data[k] = u8::from(*l != 0);
+        // Bridged pixels are unobserved (NaN in the no-data-aware smoothing too) and stay
+        // out of the level; every component holds an observed foreground pixel, since a
+        // bridge only runs between two.
         if *l != 0 && smooth.data[k].is_finite() {
             values[*l as usize - 1].push(smooth.data[k]);
         }
@@ -634,9 +637,6 @@ pub fn segment(img: &Raster<f32>, p: &Params) -> Segmentation {
     let levels = values
         .into_iter()
         .map(|mut v| {
-            if v.is_empty() {
-                return f32::INFINITY;
-            }
             let mid = v.len() / 2;
             *v.select_nth_unstable_by(mid, f32::total_cmp).1
         })
@@ -661,35 +661,27 @@ fn bridge_nodata(mask: &mut Raster<u8>, img: &Raster<f32>, gap_px: usize) {
     let mut fill = vec![false; w * h];
     // One line of the raster: `at(i)` is the flat index of its i-th pixel.
     let mut scan = |len: usize, at: &dyn Fn(usize) -> usize| {
-        let mut last_fg: Option<usize> = None;
+        // Whether the pixel before the current one is foreground.
+        let mut after_fg = false;
         let mut i = 0;
         while i < len {
             let k = at(i);
-            if mask.data[k] != 0 {
-                last_fg = Some(i);
+            if mask.data[k] != 0 || !unobserved(k) {
+                after_fg = mask.data[k] != 0;
                 i += 1;
                 continue;
             }
-            if !unobserved(k) {
-                last_fg = None;
-                i += 1;
-                continue;
-            }
-            // A run of unobserved pixels from i.
+            // A run of unobserved background pixels from i, filled when foreground closes it.
             let start = i;
             while i < len && mask.data[at(i)] == 0 && unobserved(at(i)) {
                 i += 1;
             }
-            if last_fg == Some(start.wrapping_sub(1))
-                && i < len
-                && mask.data[at(i)] != 0
-                && i - start <= gap_px
-            {
+            if after_fg && i < len && mask.data[at(i)] != 0 && i - start <= gap_px {
                 for j in start..i {
                     fill[at(j)] = true;
                 }
             }
-            last_fg = None;
+            after_fg = false;
         }
     };
     for y in 0..h {
