@@ -347,6 +347,91 @@ fn refine_names_undecided_candidates_and_keeps_decisive_ones() {
     assert_eq!(cands[1..], before[1..]);
 }
 
+#[test]
+fn a_confident_dash_is_overruled_only_into_a_painted_object_the_network_is_sure_of() {
+    let dir: [f64; 2] = [0.8, -0.6];
+    let h = dir[1].atan2(dir[0]);
+    let mut cloud = PointCloud::with_origin([500_000.0, 4_000_000.0, 10.0]);
+    let fx = fixtures(&mut cloud, h, [0.0, 0.0]);
+    let ds = dashes(&mut cloud, h, [0.0, 0.0]);
+    // A straight arrow whose head the rules missed, and three clean dashes: all confident
+    // dashes to the rules.
+    let (_, arrow) = &fx[0];
+    let mut cands: Vec<Candidate> = std::iter::once(arrow)
+        .chain(ds.iter().map(|(_, idx)| idx))
+        .map(|idx| candidate(&cloud, idx.clone(), MarkingClass::DashedLine, 0.7, dir))
+        .collect();
+    let views: Vec<ClusterPoints> = cands
+        .iter()
+        .map(|c| ClusterPoints {
+            cloud: &cloud,
+            indices: &c.indices,
+            direction: dir,
+        })
+        .collect();
+    let direct = classifier().classify(&views).unwrap();
+    drop(views);
+    assert_eq!(direct[0].class, MarkingClass::StraightArrow, "{direct:?}");
+    let params = refine::Params {
+        mode: refine::Mode::On,
+        ..refine::Params::default()
+    };
+    let stats = refine::refine(&mut cands, &cloud, &params).unwrap();
+    assert_eq!(stats.examined, 4);
+    assert_eq!(stats.reclassified, 1);
+    assert_eq!(cands[0].class, MarkingClass::StraightArrow);
+    assert!((cands[0].confidence - direct[0].confidence as f64).abs() < 1e-6);
+    for (c, p) in cands[1..].iter().zip(&direct[1..]) {
+        assert_eq!(c.class, MarkingClass::DashedLine);
+        // Agreement raises the confidence; disagreement leaves it.
+        let want = if p.class == MarkingClass::DashedLine {
+            0.7f64.max(p.confidence as f64)
+        } else {
+            0.7
+        };
+        assert!((c.confidence - want).abs() < 1e-6, "{c:?} {p:?}");
+    }
+    // Below the overrule confidence the arrow stays a dash.
+    let strict = refine::Params {
+        dash_overrule_confidence: (direct[0].confidence + 0.01).min(1.0) as f64,
+        ..params.clone()
+    };
+    let mut again = vec![candidate(
+        &cloud,
+        arrow.clone(),
+        MarkingClass::DashedLine,
+        0.7,
+        dir,
+    )];
+    let stats = refine::refine(&mut again, &cloud, &strict).unwrap();
+    assert_eq!((stats.examined, stats.reclassified), (1, 0));
+    assert_eq!(again[0].class, MarkingClass::DashedLine);
+    // A confident dash the network calls a crosswalk stripe stays a dash (the rules saw no
+    // stripe beside it): a lone 0.45 m wide, 5 m long bar.
+    let bar: Vec<[f64; 2]> = rect(0.0, 0.0, 5.0, 0.45)
+        .iter()
+        .map(|p| {
+            [
+                200.0 + p[0] * dir[0] - p[1] * dir[1],
+                50.0 + p[0] * dir[1] + p[1] * dir[0],
+            ]
+        })
+        .collect();
+    let bar = fill(&mut cloud, &bar, 0.0);
+    let said = classifier()
+        .classify(&[ClusterPoints {
+            cloud: &cloud,
+            indices: &bar,
+            direction: dir,
+        }])
+        .unwrap();
+    assert_eq!(said[0].class, MarkingClass::Crosswalk, "{said:?}");
+    assert!(said[0].confidence >= 0.8, "{said:?}");
+    let mut lone = vec![candidate(&cloud, bar, MarkingClass::DashedLine, 0.7, dir)];
+    refine::refine(&mut lone, &cloud, &params).unwrap();
+    assert_eq!(lone[0].class, MarkingClass::DashedLine);
+}
+
 /// Added time of the learned hook on a whole scene (a measurement, not a check; run with
 /// `cargo test --release --test learned -- --ignored --nocapture refine_overhead`).
 /// The marking points are the scene's labelled paint points (what a perfect front half
@@ -414,7 +499,7 @@ fn refine_overhead() {
     };
     let before = accuracy(&cands);
     let t0 = Instant::now();
-    let stats = refine::refine_with(c, &mut cands, &marks, 0.5).unwrap();
+    let stats = refine::refine_with(c, &mut cands, &marks, &refine::Params::default()).unwrap();
     let t_refine = t0.elapsed().as_secs_f64();
     let after = accuracy(&cands);
     println!(

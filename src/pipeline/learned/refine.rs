@@ -2,8 +2,9 @@
 //! could not decide.
 //!
 //! # What
-//! [`refine`] takes the classify stage's candidates and, for each one left `unknown` or
-//! classified with a confidence below [`Params::decisive_confidence`], asks the network.
+//! [`refine`] takes the classify stage's candidates and, for each one left `unknown`,
+//! classified with a confidence below [`Params::decisive_confidence`], or a dash, asks the
+//! network.
 //! Decisive geometric results (long solid lines, stop lines, crosswalk stripes the rules are
 //! sure of) are left alone: the rules are exact there and the network is not needed.
 //!
@@ -18,12 +19,18 @@
 //!    - network says a class with `p` ≥ threshold: that class, confidence `p` (a geometric
 //!      class with low confidence is overruled; when both agree the larger confidence stays);
 //!    - network below the threshold (or says `unknown`): the candidate keeps its geometric
-//!      class; an `unknown` candidate gets confidence = the network's `unknown` confidence.
+//!      class; an `unknown` candidate gets confidence = the network's `unknown` confidence;
+//!    - a confident dash (the rules' bar test cannot tell a dash from a straight arrow whose
+//!      head is worn or too sparsely scanned, or from a lone stop line along the road) keeps
+//!      its class unless the network names another painted object — an arrow, a diamond, a
+//!      guideline or stop line, never a line or a crosswalk stripe (the rules found no
+//!      stripe beside it) — with probability ≥ `dash_overrule_confidence`.
 //!
 //! # Parameters
 //! [`Params`]: `mode` (`auto`: run when ONNX Runtime is installed, otherwise leave the
 //! candidates unchanged with a warning; `on`: a missing runtime is an error; `off`),
-//! `decisive_confidence` (default 0.5: below it a geometric class is re-examined).
+//! `decisive_confidence` (default 0.5: below it a geometric class is re-examined),
+//! `dash_overrule_confidence` (default 0.8).
 //!
 //! # Complexity
 //! O(m·n) feature preparation per selected cluster of m points (n = 256), plus one network
@@ -57,6 +64,11 @@ pub struct Params {
     pub mode: Mode,
     /// Candidates whose geometric confidence is below this are re-examined (0..=1).
     pub decisive_confidence: f64,
+    /// Dashes are always shown to the network (a straight arrow whose head is worn or cut
+    /// off, a lone stop line along the road and a wide dash are the same bar to the rules);
+    /// the network overrules a dash with another painted-object class only at this
+    /// probability or above (0..=1). Default 0.8.
+    pub dash_overrule_confidence: f64,
 }
 
 impl Default for Params {
@@ -64,13 +76,20 @@ impl Default for Params {
         Self {
             mode: Mode::Auto,
             decisive_confidence: 0.5,
+            dash_overrule_confidence: 0.8,
         }
     }
 }
 
 impl Params {
     pub fn validate(&self) -> Result<(), String> {
-        crate::pipeline::pavement::check_range("decisive_confidence", self.decisive_confidence, 0.0, 1.0)
+        crate::pipeline::pavement::check_range("decisive_confidence", self.decisive_confidence, 0.0, 1.0)?;
+        crate::pipeline::pavement::check_range(
+            "dash_overrule_confidence",
+            self.dash_overrule_confidence,
+            0.0,
+            1.0,
+        )
     }
 }
 
@@ -100,7 +119,7 @@ pub fn refine(
         }
         Err(e) => return Err(e),
     };
-    refine_with(classifier, candidates, cloud, params.decisive_confidence)
+    refine_with(classifier, candidates, cloud, params)
 }
 
 /// [`refine`] with an explicit classifier.
@@ -108,13 +127,20 @@ pub fn refine_with(
     classifier: &Classifier,
     candidates: &mut [Candidate],
     cloud: &PointCloud,
-    decisive_confidence: f64,
+    params: &Params,
 ) -> Result<RefineStats, PipelineError> {
+    // A confident dash is still shown to the network, which may only turn it into another
+    // painted object, and only when sure (`dash_overrule_confidence`).
+    let confident_dash =
+        |c: &Candidate| c.class == MarkingClass::DashedLine && c.confidence >= params.decisive_confidence;
     let selected: Vec<usize> = candidates
         .iter()
         .enumerate()
         .filter(|(_, c)| {
-            !c.indices.is_empty() && (c.class == MarkingClass::Unknown || c.confidence < decisive_confidence)
+            !c.indices.is_empty()
+                && (c.class == MarkingClass::Unknown
+                    || c.class == MarkingClass::DashedLine
+                    || c.confidence < params.decisive_confidence)
         })
         .map(|(i, _)| i)
         .collect();
@@ -139,7 +165,23 @@ pub fn refine_with(
     for (&i, pred) in selected.iter().zip(&preds) {
         let c = &mut candidates[i];
         let top = pred.prob(pred.class) as f64;
-        if pred.class != MarkingClass::Unknown && top >= threshold as f64 {
+        if confident_dash(c) {
+            // Not a line, and not a crosswalk stripe: the rules saw no stripe beside it.
+            let object = !matches!(
+                pred.class,
+                MarkingClass::DashedLine
+                    | MarkingClass::SolidLine
+                    | MarkingClass::Crosswalk
+                    | MarkingClass::Unknown
+            );
+            if pred.class == c.class {
+                c.confidence = c.confidence.max(top);
+            } else if object && top >= params.dash_overrule_confidence.max(threshold as f64) {
+                c.class = pred.class;
+                c.confidence = top;
+                stats.reclassified += 1;
+            }
+        } else if pred.class != MarkingClass::Unknown && top >= threshold as f64 {
             if pred.class == c.class {
                 c.confidence = c.confidence.max(top);
             } else {
