@@ -5,9 +5,10 @@
 //! `ORT_DYLIB_PATH`; see models/README.md).
 
 use roadmark::pipeline::PointCloud;
-use roadmark::pipeline::classify::{Candidate, Shape};
+use roadmark::pipeline::classify::{self, Candidate, Shape};
+use roadmark::pipeline::cluster;
 use roadmark::pipeline::learned::{Classifier, ClusterPoints, FEATURES_PER_POINT, refine, runtime};
-use roadmark::pipeline::types::MarkingClass;
+use roadmark::pipeline::types::{MarkingClass, Pose, Trajectory};
 use roadmark::sim::markings::{self, ArrowKind, Frame2, Paint, Standard};
 
 fn classifier() -> &'static Classifier {
@@ -274,6 +275,7 @@ fn candidate(
         class,
         confidence,
         line: None,
+        whole: None,
     }
 }
 
@@ -430,6 +432,67 @@ fn a_confident_dash_is_overruled_only_into_a_painted_object_the_network_is_sure_
     let mut lone = vec![candidate(&cloud, bar, MarkingClass::DashedLine, 0.7, dir)];
     refine::refine(&mut lone, &cloud, &params).unwrap();
     assert_eq!(lone[0].class, MarkingClass::DashedLine);
+}
+
+#[test]
+fn a_long_arrow_the_rules_peeled_apart_is_put_back_together() {
+    // GB 5768 highway straight arrow (9 m) in a lane beside a straight drive along +x.
+    let mut cloud = PointCloud::with_origin([500_000.0, 4_000_000.0, 10.0]);
+    let st = Standard::parse("gb").unwrap();
+    let frame = Frame2 {
+        o: [10.0, 0.0],
+        u: [1.0, 0.0],
+        v: [0.0, 1.0],
+    };
+    let arrow = fill_marking(
+        &mut cloud,
+        &markings::arrow(ArrowKind::Straight, &frame, st.arrow_len_highway),
+    );
+    let poses: Vec<Pose> = (0..=60)
+        .map(|i| Pose {
+            time: i as f64,
+            x: i as f64 - 20.0,
+            y: -3.5,
+            z: 0.0,
+            heading_deg: None,
+            roll_deg: None,
+            pitch_deg: None,
+        })
+        .collect();
+    let traj = Trajectory::new(poses).unwrap();
+    let clusters = cluster::run(&cloud, &cluster::Params::default());
+    assert_eq!(clusters.len(), 1);
+    let mut cands = classify::run(&cloud, &clusters, &traj, &classify::Params::default());
+    // The shaft passes the line test and is peeled off the head.
+    assert!(
+        cands.len() >= 2,
+        "{:?}",
+        cands.iter().map(|c| c.class).collect::<Vec<_>>()
+    );
+    assert!(cands.iter().all(|c| c.whole.is_some()));
+    assert!(cands.iter().all(|c| c.class != MarkingClass::StraightArrow));
+    let params = refine::Params {
+        mode: refine::Mode::On,
+        ..refine::Params::default()
+    };
+    let stats = refine::refine(&mut cands, &cloud, &params).unwrap();
+    assert_eq!(stats.reassembled, 1);
+    assert_eq!(cands.len(), 1);
+    assert_eq!(cands[0].class, MarkingClass::StraightArrow);
+    assert!(cands[0].confidence >= 0.8);
+    assert_eq!(cands[0].indices.len(), arrow.len());
+    assert!(cands[0].whole.is_none());
+    // The robust rectangle of the whole arrow (trimmed extent: 8.5 of its 9 m).
+    assert!(cands[0].shape.length_m > 8.0, "{:?}", cands[0].shape);
+    // With the overrule confidence out of reach the pieces stay as the rules left them.
+    let mut apart = classify::run(&cloud, &clusters, &traj, &classify::Params::default());
+    let n = apart.len();
+    let strict = refine::Params {
+        dash_overrule_confidence: 1.0,
+        ..params
+    };
+    let stats = refine::refine(&mut apart, &cloud, &strict).unwrap();
+    assert_eq!((stats.reassembled, apart.len()), (0, n));
 }
 
 /// Added time of the learned hook on a whole scene (a measurement, not a check; run with

@@ -19,6 +19,10 @@
 //!    arrow's shaft and head is no line) and it runs within `line_max_angle_deg` of the
 //!    trajectory.
 //!    The line test works on curved pieces, where an MBR is a fat wrong rectangle.
+//!    Long clusters that fail it are a line with something attached (gore chevrons, a second
+//!    line): the lines are peeled off (`peel_lines`); pieces of a cluster no longer than
+//!    [`MAX_OBJECT_LENGTH_M`] keep it in `Candidate::whole`, for the learned classifier to
+//!    put back together when it is one object (a long arrow).
 //! 2. Broken lines are re-joined (Pan 2019): line pieces and short narrow fragments whose
 //!    ends are ≤ `join_gap_m` apart along the trajectory, at the same offset (prediction
 //!    from the piece's slope) and of similar width are merged (mutual best match), so a
@@ -59,6 +63,7 @@ use super::refline::RefLine;
 use super::types::{MarkingClass, PointCloud, Trajectory};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::sync::Arc;
 
 /// Parameters of this stage (JSON object `classify` in the job parameters).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -242,7 +247,16 @@ pub struct Candidate {
     pub shape: Shape,
     /// Present for pieces running along the road (lane-line material).
     pub line: Option<LineGeometry>,
+    /// For a piece peeled off a cluster no longer than [`MAX_OBJECT_LENGTH_M`] (see
+    /// `peel_lines`): that cluster as it was, unclassified. A long arrow (GB 5768: 9 m at
+    /// highway speeds) has a shaft the peeling takes for a line; the learned classifier
+    /// (`learned::refine`) puts the cluster back together when it names it one painted object.
+    #[serde(skip)]
+    pub whole: Option<Arc<Candidate>>,
 }
+
+/// Longest single painted object (m): GB 5768 highway arrows are 9 m, MUTCD arrows ≤ 7.3 m.
+pub const MAX_OBJECT_LENGTH_M: f64 = 12.0;
 
 /// Why a cluster was dropped.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -339,6 +353,7 @@ fn describe(
         confidence: 0.0,
         shape,
         line,
+        whole: None,
     }
 }
 
@@ -510,6 +525,7 @@ fn peel_lines(
     if c.line.is_some() || c.indices.len() < 40 {
         return vec![c];
     }
+    let whole = (c.shape.length_m <= MAX_OBJECT_LENGTH_M).then(|| Arc::new(c.clone()));
     let mut out = Vec::new();
     let mut rest = c.indices;
     for _round in 0..3 {
@@ -551,6 +567,9 @@ fn peel_lines(
     for comp in geom::components(&pts, 0.25) {
         let idx: Vec<usize> = comp.into_iter().map(|k| rest[k]).collect();
         out.push(describe(xy, intensity, idx, refl, p));
+    }
+    for piece in &mut out {
+        piece.whole.clone_from(&whole);
     }
     out
 }

@@ -25,6 +25,10 @@
 //!      its class unless the network names another painted object — an arrow, a diamond, a
 //!      guideline or stop line, never a line or a crosswalk stripe (the rules found no
 //!      stripe beside it) — with probability ≥ `dash_overrule_confidence`.
+//! 4. Clusters the classify stage peeled a line off and that are no longer than one painted
+//!    object (`Candidate::whole`: a 9 m highway arrow's shaft passes the line test) are shown
+//!    to the network whole as well; when it names one such painted object with probability
+//!    ≥ `dash_overrule_confidence`, the pieces are replaced by the whole cluster.
 //!
 //! # Parameters
 //! [`Params`]: `mode` (`auto`: run when ONNX Runtime is installed, otherwise leave the
@@ -37,6 +41,7 @@
 //! evaluation per cluster (≈ 4 M multiply-adds); memory O(batch · n) per worker.
 
 use serde::{Deserialize, Serialize};
+use std::sync::Arc;
 
 use super::{Classifier, ClusterPoints};
 use crate::pipeline::PipelineError;
@@ -100,11 +105,13 @@ pub struct RefineStats {
     pub examined: usize,
     /// Candidates whose class changed.
     pub reclassified: usize,
+    /// Clusters put back together from the pieces the classify stage had peeled apart.
+    pub reassembled: usize,
 }
 
 /// Reclassify the non-decisive candidates with the shared built-in model (see module docs).
 pub fn refine(
-    candidates: &mut [Candidate],
+    candidates: &mut Vec<Candidate>,
     cloud: &PointCloud,
     params: &Params,
 ) -> Result<RefineStats, PipelineError> {
@@ -125,7 +132,7 @@ pub fn refine(
 /// [`refine`] with an explicit classifier.
 pub fn refine_with(
     classifier: &Classifier,
-    candidates: &mut [Candidate],
+    candidates: &mut Vec<Candidate>,
     cloud: &PointCloud,
     params: &Params,
 ) -> Result<RefineStats, PipelineError> {
@@ -144,44 +151,49 @@ pub fn refine_with(
         })
         .map(|(i, _)| i)
         .collect();
-    if selected.is_empty() {
+    // The short clusters the classify stage peeled lines off, each once.
+    let mut wholes: Vec<Arc<Candidate>> = Vec::new();
+    for c in candidates.iter() {
+        if let Some(w) = &c.whole
+            && !wholes.iter().any(|x| Arc::ptr_eq(x, w))
+        {
+            wholes.push(Arc::clone(w));
+        }
+    }
+    if selected.is_empty() && wholes.is_empty() {
         return Ok(RefineStats::default());
     }
     let views: Vec<ClusterPoints<'_>> = selected
         .iter()
-        .map(|&i| ClusterPoints {
+        .map(|&i| &candidates[i])
+        .chain(wholes.iter().map(|w| w.as_ref()))
+        .map(|c| ClusterPoints {
             cloud,
-            indices: &candidates[i].indices,
-            direction: candidates[i].shape.driving_direction,
+            indices: &c.indices,
+            direction: c.shape.driving_direction,
         })
         .collect();
     let preds = classifier.classify(&views)?;
     drop(views);
-    let threshold = classifier.info().unknown_threshold;
+    let (preds, whole_preds) = preds.split_at(selected.len());
+    let threshold = classifier.info().unknown_threshold as f64;
+    let overrule = params.dash_overrule_confidence.max(threshold);
     let mut stats = RefineStats {
-        examined: selected.len(),
-        reclassified: 0,
+        examined: selected.len() + wholes.len(),
+        ..RefineStats::default()
     };
-    for (&i, pred) in selected.iter().zip(&preds) {
+    for (&i, pred) in selected.iter().zip(preds) {
         let c = &mut candidates[i];
         let top = pred.prob(pred.class) as f64;
         if confident_dash(c) {
-            // Not a line, and not a crosswalk stripe: the rules saw no stripe beside it.
-            let object = !matches!(
-                pred.class,
-                MarkingClass::DashedLine
-                    | MarkingClass::SolidLine
-                    | MarkingClass::Crosswalk
-                    | MarkingClass::Unknown
-            );
             if pred.class == c.class {
                 c.confidence = c.confidence.max(top);
-            } else if object && top >= params.dash_overrule_confidence.max(threshold as f64) {
+            } else if painted_object(pred.class) && top >= overrule {
                 c.class = pred.class;
                 c.confidence = top;
                 stats.reclassified += 1;
             }
-        } else if pred.class != MarkingClass::Unknown && top >= threshold as f64 {
+        } else if pred.class != MarkingClass::Unknown && top >= threshold {
             if pred.class == c.class {
                 c.confidence = c.confidence.max(top);
             } else {
@@ -193,7 +205,45 @@ pub fn refine_with(
             c.confidence = pred.confidence as f64;
         }
     }
+    // A peeled cluster the network names one painted object is put back together: its
+    // first piece becomes the whole cluster, the other pieces go.
+    let mut keep = vec![true; candidates.len()];
+    for (w, pred) in wholes.iter().zip(whole_preds) {
+        let top = pred.prob(pred.class) as f64;
+        if !painted_object(pred.class) || top < overrule {
+            continue;
+        }
+        let members: Vec<usize> = (0..candidates.len())
+            .filter(|&i| keep[i] && candidates[i].whole.as_ref().is_some_and(|x| Arc::ptr_eq(x, w)))
+            .collect();
+        let Some((&first, rest)) = members.split_first() else {
+            continue;
+        };
+        rest.iter().for_each(|&i| keep[i] = false);
+        candidates[first] = Candidate {
+            class: pred.class,
+            confidence: top,
+            whole: None,
+            ..Candidate::clone(w)
+        };
+        stats.reassembled += 1;
+    }
+    let mut k = 0;
+    candidates.retain(|_| {
+        k += 1;
+        keep[k - 1]
+    });
     Ok(stats)
+}
+
+/// A painted object other than a line or a crosswalk stripe: what the network may make of
+/// a confident dash (the rules saw no stripe beside it, and they are sure of lines) or of a
+/// cluster the classify stage peeled a line off.
+fn painted_object(class: MarkingClass) -> bool {
+    !matches!(
+        class,
+        MarkingClass::DashedLine | MarkingClass::SolidLine | MarkingClass::Crosswalk | MarkingClass::Unknown
+    )
 }
 
 fn warn_once(e: &PipelineError) {
