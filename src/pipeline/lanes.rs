@@ -30,8 +30,10 @@
 //! 3. **Dashed or solid**: pieces closer than `run_join_gap_m` form painted runs; runs up
 //!    to `dash_max_run_m` are dash-like. At least `min_dashes` consecutive dash-like runs
 //!    of regular length (≥ 60 % within ±35 % of the median) with paint ≤ 80 % of their span
-//!    form a dashed stretch; everything else is solid (occlusion breaks a solid line into
-//!    irregular runs). With `split_on_class_change`, a chain that is solid for ≥
+//!    form a dashed stretch, and so do dash-like runs whose centres repeat with one period
+//!    (≥ 75 % of the spacings within ±15 % of the median spacing or twice it; dashes seen
+//!    only in part have irregular lengths but keep the period); everything else is solid
+//!    (occlusion breaks a solid line into irregular runs). With `split_on_class_change`, a chain that is solid for ≥
 //!    `min_length_m` and dashed elsewhere becomes two lane lines.
 //! 4. **Smooth centreline**: offset(s) by Gaussian local linear regression (bandwidth
 //!    `smoothing_m`) over the pieces' samples; across gaps wider than the bandwidth a cubic
@@ -618,7 +620,23 @@ fn regimes(items: &[Item], chain: &[usize], p: &Params) -> Vec<(LaneLineClass, V
             usable.iter().filter(|&&x| (x - mg).abs() <= 0.35 * mg).count() as f64
                 >= 0.6 * usable.len() as f64
         };
-        if lens.len() >= p.min_dashes && regular && regular_gaps && paint <= 0.7 {
+        // Dashes seen only in part (sparse far scan rows, wear) measure 1–2 m of a 2 m dash:
+        // their lengths and gaps vary, but their centres still repeat with the line's period
+        // (jitter ≤ half a dash: a sixth of a GB 2/4 m period), or twice it where one dash is
+        // missing; a run longer than most of a period is no dash. A solid line sampled in
+        // fragments has no such period.
+        let regular_period = lens.len() >= 3 && {
+            let centres: Vec<f64> = runs[i..=j].iter().map(|r| 0.5 * (r.0 + r.1)).collect();
+            let spacings: Vec<f64> = centres.windows(2).map(|w| w[1] - w[0]).collect();
+            let period = geom::median(&mut spacings.clone());
+            let on_period = |x: f64| {
+                let k = (x / period).round();
+                (1.0..=2.0).contains(&k) && (x - k * period).abs() <= 0.15 * period
+            };
+            spacings.iter().filter(|&&x| on_period(x)).count() as f64 >= 0.75 * spacings.len() as f64
+                && lens.iter().all(|&l| l <= 0.8 * period)
+        };
+        if lens.len() >= p.min_dashes && (regular && regular_gaps || regular_period) && paint <= 0.7 {
             dashed[i..=j].iter_mut().for_each(|d| *d = true);
         }
         i = j + 1;
@@ -824,5 +842,43 @@ mod tests {
         );
         let aligned = [frag(0, 0.0, 0.0), frag(1, 13.0, 0.0)];
         assert_eq!(grow(&aligned, &t, &lenient).lines[0].pieces.len(), 2);
+    }
+
+    /// A 2/4 m dashed line seen in part (each dash read as 1–2 m, so lengths and gaps
+    /// vary, one dash missing) keeps its 6 m period and is dashed; a solid line read as
+    /// fragments with the same lengths at irregular spacings is solid.
+    #[test]
+    fn partly_seen_dashes_are_dashed_by_their_period() {
+        let t = traj();
+        let p = Params::default();
+        // (start, length) of the seen part of each dash; the dash at 36 m is missing.
+        let seen = [
+            (0.5, 1.0),
+            (6.05, 1.9),
+            (12.5, 1.1),
+            (18.0, 2.0),
+            (24.05, 1.9),
+            (30.6, 0.8),
+            (42.2, 1.3),
+        ];
+        let dashes: Vec<LanePiece> = seen
+            .iter()
+            .enumerate()
+            .map(|(i, &(a, l))| piece(i, a, a + l, MarkingClass::DashedLine))
+            .collect();
+        let lanes = grow(&dashes, &t, &p);
+        assert_eq!(lanes.lines.len(), 1);
+        assert_eq!(lanes.lines[0].class, LaneLineClass::DashedLine);
+        // The same fragments where a solid line was occluded irregularly.
+        let starts = [0.0, 3.2, 11.0, 14.5, 22.8, 33.0, 36.1];
+        let fragments: Vec<LanePiece> = starts
+            .iter()
+            .zip(&seen)
+            .enumerate()
+            .map(|(i, (&a, &(_, l)))| piece(i, a, a + l, MarkingClass::DashedLine))
+            .collect();
+        let lanes = grow(&fragments, &t, &p);
+        assert_eq!(lanes.lines.len(), 1);
+        assert_eq!(lanes.lines[0].class, LaneLineClass::SolidLine);
     }
 }
