@@ -448,8 +448,6 @@ fn stop_line_crosswalk_and_distractors() {
         cloud.push_local(40.0 + r * a.cos(), 1.0 + r * a.sin(), 0.0, 40000.0, None, 0);
     }
     fill(&mut cloud, 50.0, 0.0, 3.0, 0.04, 70.0);
-    // A repair patch: a filled 3 × 2.2 m rectangle.
-    fill(&mut cloud, 65.0, 1.0, 3.0, 2.2, 0.0);
     let traj = Trajectory::new(vec![pose(0.0, -10.0, -1.0), pose(10.0, 90.0, -1.0)]).unwrap();
     let clusters = cluster::run(&cloud, &cluster::Params::default());
     let all = classify::assess(&cloud, &clusters, &traj, &classify::Params::default());
@@ -473,12 +471,7 @@ fn stop_line_crosswalk_and_distractors() {
         kept.iter().filter(|c| c.class == MarkingClass::Crosswalk).count(),
         5
     );
-    assert_eq!(
-        kept.len(),
-        6,
-        "manhole cover, sealant streak and patch are dropped"
-    );
-    assert!(all.iter().any(|(_, d)| *d == Some(classify::DropReason::Patch)));
+    assert_eq!(kept.len(), 6, "manhole cover and sealant streak are dropped");
     assert!(all.iter().any(|(_, d)| *d == Some(classify::DropReason::Blob)));
     assert!(
         all.iter()

@@ -29,9 +29,7 @@
 //!    sparse far line or a worn dash is one object.
 //! 3. Rules (first match wins):
 //!    - tiny (few points or area) → dropped; compact blobs ≤ `blob_max_size_m` with aspect
-//!      < 1.6 (manhole covers, ~0.6–0.8 m round) → dropped; filled rectangles ≥ 1 m wide
-//!      (fill ≥ 0.85: repair patches, concrete slabs; no marking is a filled area that
-//!      wide) → dropped;
+//!      < 1.6 (manhole covers, ~0.6–0.8 m round) → dropped;
 //!    - line: length ≥ `solid_min_length_m` and length/width ≥ `solid_min_ratio` (Yao 2019:
 //!      a > 7 m, a/b > 20) → `solid_line`; `dash_min_length_m` ≤ length < solid → `dashed_line`
 //!      (GB 6 m / 2 m, MUTCD 3 m, Italy 4.5 m); shorter line fragments → `unknown`;
@@ -257,11 +255,6 @@ pub struct Candidate {
     pub whole: Option<Arc<Candidate>>,
 }
 
-/// Filled areas at least this wide (m) and filled at least [`PATCH_MIN_FILL`] are no paint.
-pub const PATCH_MIN_WIDTH_M: f64 = 1.0;
-/// See [`PATCH_MIN_WIDTH_M`]: mean slice width over the rectangle width.
-pub const PATCH_MIN_FILL: f64 = 0.85;
-
 /// Longest single painted object (m): GB 5768 highway arrows are 9 m, MUTCD arrows ≤ 7.3 m.
 pub const MAX_OBJECT_LENGTH_M: f64 = 12.0;
 
@@ -272,8 +265,6 @@ pub enum DropReason {
     Tiny,
     Blob,
     SteepNoise,
-    /// A filled area wider than any painted bar: a repair patch or a concrete slab.
-    Patch,
 }
 
 /// Classify clusters; only kept candidates are returned, in a deterministic order (by
@@ -864,11 +855,6 @@ fn rule(mut c: Candidate, p: &Params) -> (Candidate, Option<DropReason>) {
     }
     if s.length_m <= p.blob_max_size_m && aspect < 1.6 {
         return (c, Some(DropReason::Blob));
-    }
-    // Paint is lines, bars and strokes: no marking fills a rectangle over a metre wide
-    // (crosswalk stripes are ≤ 0.65 m, arrow heads and diamonds are triangles or outlines).
-    if s.width_m >= PATCH_MIN_WIDTH_M && s.fill_ratio >= PATCH_MIN_FILL {
-        return (c, Some(DropReason::Patch));
     }
     let bar = s.fill_ratio >= 0.65 && aspect >= 2.5;
     let ang = s.angle_to_trajectory_deg;
