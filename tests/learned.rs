@@ -428,9 +428,15 @@ fn a_confident_dash_is_overruled_only_into_a_painted_object_the_network_is_sure_
         }])
         .unwrap();
     assert_eq!(said[0].class, MarkingClass::Crosswalk, "{said:?}");
-    assert!(said[0].confidence >= 0.8, "{said:?}");
+    // Even with the overrule confidence below the network's, the class is not one a dash
+    // may become.
+    let lenient = refine::Params {
+        dash_overrule_confidence: (said[0].confidence as f64 - 0.05).max(0.0),
+        ..params.clone()
+    };
     let mut lone = vec![candidate(&cloud, bar, MarkingClass::DashedLine, 0.7, dir)];
-    refine::refine(&mut lone, &cloud, &params).unwrap();
+    let stats = refine::refine(&mut lone, &cloud, &lenient).unwrap();
+    assert_eq!((stats.examined, stats.reclassified), (1, 0));
     assert_eq!(lone[0].class, MarkingClass::DashedLine);
 }
 
