@@ -33,8 +33,8 @@
 //!    form a dashed stretch, and so do dash-like runs whose centres repeat with one period
 //!    (≥ 75 % of the spacings within ±15 % of the median spacing or twice it; dashes seen
 //!    only in part have irregular lengths but keep the period); everything else is solid
-//!    (occlusion breaks a solid line into irregular runs). With `split_on_class_change`, a chain that is solid for ≥
-//!    `min_length_m` and dashed elsewhere becomes two lane lines.
+//!    (occlusion breaks a solid line into irregular runs). With `split_on_class_change`, a
+//!    chain that is solid for ≥ `min_length_m` and dashed elsewhere becomes two lane lines.
 //! 4. **Smooth centreline**: offset(s) by Gaussian local linear regression (bandwidth
 //!    `smoothing_m`) over the pieces' samples; across gaps wider than the bandwidth a cubic
 //!    Hermite joins the fitted ends (values and slopes), so the line follows the road's

@@ -151,13 +151,14 @@ pub fn refine_with(
         })
         .map(|(i, _)| i)
         .collect();
-    // The short clusters the classify stage peeled lines off, each once.
-    let mut wholes: Vec<Arc<Candidate>> = Vec::new();
-    for c in candidates.iter() {
-        if let Some(w) = &c.whole
-            && !wholes.iter().any(|x| Arc::ptr_eq(x, w))
-        {
-            wholes.push(Arc::clone(w));
+    // The short clusters the classify stage peeled lines off, each once, with the
+    // candidates (pieces) peeled off it.
+    let mut wholes: Vec<(Arc<Candidate>, Vec<usize>)> = Vec::new();
+    for (i, c) in candidates.iter().enumerate() {
+        let Some(w) = &c.whole else { continue };
+        match wholes.iter_mut().find(|(x, _)| Arc::ptr_eq(x, w)) {
+            Some((_, pieces)) => pieces.push(i),
+            None => wholes.push((Arc::clone(w), vec![i])),
         }
     }
     if selected.is_empty() && wholes.is_empty() {
@@ -166,7 +167,7 @@ pub fn refine_with(
     let views: Vec<ClusterPoints<'_>> = selected
         .iter()
         .map(|&i| &candidates[i])
-        .chain(wholes.iter().map(|w| w.as_ref()))
+        .chain(wholes.iter().map(|(w, _)| w.as_ref()))
         .map(|c| ClusterPoints {
             cloud,
             indices: &c.indices,
@@ -185,15 +186,12 @@ pub fn refine_with(
     for (&i, pred) in selected.iter().zip(preds) {
         let c = &mut candidates[i];
         let top = pred.prob(pred.class) as f64;
-        if confident_dash(c) {
-            if pred.class == c.class {
-                c.confidence = c.confidence.max(top);
-            } else if painted_object(pred.class) && top >= overrule {
-                c.class = pred.class;
-                c.confidence = top;
-                stats.reclassified += 1;
-            }
-        } else if pred.class != MarkingClass::Unknown && top >= threshold {
+        let accepted = if confident_dash(c) {
+            pred.class == c.class || (painted_object(pred.class) && top >= overrule)
+        } else {
+            pred.class != MarkingClass::Unknown && top >= threshold
+        };
+        if accepted {
             if pred.class == c.class {
                 c.confidence = c.confidence.max(top);
             } else {
@@ -208,31 +206,22 @@ pub fn refine_with(
     // A peeled cluster the network names one painted object is put back together: its
     // first piece becomes the whole cluster, the other pieces go.
     let mut keep = vec![true; candidates.len()];
-    for (w, pred) in wholes.iter().zip(whole_preds) {
+    for ((w, pieces), pred) in wholes.iter().zip(whole_preds) {
         let top = pred.prob(pred.class) as f64;
         if !painted_object(pred.class) || top < overrule {
             continue;
         }
-        let members: Vec<usize> = (0..candidates.len())
-            .filter(|&i| keep[i] && candidates[i].whole.as_ref().is_some_and(|x| Arc::ptr_eq(x, w)))
-            .collect();
-        let Some((&first, rest)) = members.split_first() else {
-            continue;
-        };
-        rest.iter().for_each(|&i| keep[i] = false);
-        candidates[first] = Candidate {
+        candidates[pieces[0]] = Candidate {
             class: pred.class,
             confidence: top,
             whole: None,
             ..Candidate::clone(w)
         };
+        pieces[1..].iter().for_each(|&i| keep[i] = false);
         stats.reassembled += 1;
     }
-    let mut k = 0;
-    candidates.retain(|_| {
-        k += 1;
-        keep[k - 1]
-    });
+    let mut keep = keep.into_iter();
+    candidates.retain(|_| keep.next().unwrap_or(true));
     Ok(stats)
 }
 
