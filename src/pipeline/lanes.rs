@@ -511,8 +511,9 @@ fn median_offset_in(so: &[[f64; 2]], a: f64, b: f64) -> Option<f64> {
 /// Merge pieces that cover the same stretch of the same painted line (a line split
 /// lengthwise into strips, duplicates from two scanner heads or overlapping chunks): they
 /// overlap along the road by ≥ 0.5 m (or half the shorter one) and their median offsets
-/// over the overlap differ by less than half the wider piece plus 5 cm. Side-by-side lines
-/// (≥ 0.25 m centre to centre) are never merged. Input sorted by start; output too.
+/// over the overlap — and over its first and last thirds, when those are ≥ 1 m — differ by
+/// less than half the wider piece plus 5 cm. Side-by-side lines (≥ 0.25 m centre to
+/// centre) are never merged. Input sorted by start; output too.
 fn merge_overlaps(items: Vec<Item>) -> Vec<Item> {
     let n = items.len();
     let mut parent: Vec<usize> = (0..n).collect();
@@ -530,13 +531,29 @@ fn merge_overlaps(items: Vec<Item>) -> Vec<Item> {
             if ov < 0.5_f64.min(0.5 * (a1 - a0).min(b1 - b0)) {
                 continue;
             }
+            let tol = 0.5 * items[i].width.max(items[j].width) + 0.05;
             let (Some(oa), Some(ob)) = (
                 median_offset_in(&items[i].so, lo, hi),
                 median_offset_in(&items[j].so, lo, hi),
             ) else {
                 continue;
             };
-            if (oa - ob).abs() < 0.5 * items[i].width.max(items[j].width) + 0.05 {
+            // Over a long overlap the ends must agree too: a line diverging from another
+            // (an exit ramp's edge line leaving the lane line it started on) agrees over
+            // the first part of the common stretch, where the median is taken, and not
+            // at its far end.
+            let third = (hi - lo) / 3.0;
+            let ends_agree = third < 1.0
+                || [(lo, lo + third), (hi - third, hi)].iter().all(|&(a, b)| {
+                    match (
+                        median_offset_in(&items[i].so, a, b),
+                        median_offset_in(&items[j].so, a, b),
+                    ) {
+                        (Some(x), Some(y)) => (x - y).abs() < tol,
+                        _ => true,
+                    }
+                });
+            if (oa - ob).abs() < tol && ends_agree {
                 geom::union(&mut parent, i, j);
                 any = true;
             }
@@ -842,6 +859,46 @@ mod tests {
         );
         let aligned = [frag(0, 0.0, 0.0), frag(1, 13.0, 0.0)];
         assert_eq!(grow(&aligned, &t, &lenient).lines[0].pieces.len(), 2);
+    }
+
+    /// An exit ramp's edge line leaving a lane line, and the chain of wide dashes that
+    /// carries on along the lane line beside it: over their 60 m common stretch the median
+    /// offsets differ by 0.15 m (less than half a 0.45 m dash plus 5 cm), but at the far
+    /// end by 0.4 m. They stay two lines; the same chain along a line that keeps its offset
+    /// (a duplicate from a second scanner head) is merged.
+    #[test]
+    fn a_diverging_line_is_not_merged_with_the_dashes_beside_it() {
+        let item = |key: usize, so: Vec<[f64; 2]>, width: f64| Item {
+            keys: vec![key],
+            so,
+            width,
+            conf: 0.9,
+        };
+        let ramp = |k: f64| {
+            item(
+                0,
+                (0..=120)
+                    .map(|i| [0.5 * i as f64, 3.5 + k * (0.5 * i as f64).powi(2)])
+                    .collect(),
+                0.2,
+            )
+        };
+        let dashes = || {
+            item(
+                1,
+                (0..=120)
+                    .map(|i| 0.5 * i as f64)
+                    .filter(|x| x % 6.0 < 3.0)
+                    .map(|x| [x, 3.5])
+                    .collect(),
+                0.45,
+            )
+        };
+        let diverging = merge_overlaps(vec![ramp(1.67e-4), dashes()]);
+        assert_eq!(diverging.len(), 2);
+        let parallel = merge_overlaps(vec![ramp(0.0), dashes()]);
+        assert_eq!(parallel.len(), 1);
+        assert_eq!(parallel[0].keys, vec![0, 1]);
     }
 
     /// A 2/4 m dashed line seen in part (each dash read as 1–2 m, so lengths and gaps
