@@ -109,7 +109,9 @@ pub struct Params {
     pub reenter: bool,
     /// A flat strip at least this wide (m) …
     pub reentry_min_width_m: f64,
-    /// … at least this far (m) beyond the edge, with no flat strip in between (a sidewalk) …
+    /// … at least this far (m) beyond the edge, with no flat strip in between (a sidewalk;
+    /// a flat strip more than 0.35 m above the road — a barrier top, a vehicle's roof — is
+    /// none) …
     pub reentry_min_separation_m: f64,
     /// … and within this height (m) of the road is road again.
     pub reentry_max_step_m: f64,
@@ -432,6 +434,13 @@ struct Window {
     thick: f64,
 }
 
+/// A flat strip beyond the road edge is a sidewalk or verge — beyond which no second
+/// carriageway is sought — only when at most this far (m) above the road (curbs are
+/// 0.1–0.3 m high; any strip below the road, a ditch or an embankment, counts too).
+/// Higher flat strips are the tops of median barriers (0.8–1.1 m) or the hood and roof of
+/// a vehicle beside the scanner, and the road goes on beyond them.
+const SIDEWALK_MAX_STEP_M: f64 = 0.35;
+
 fn slice_pavement(idx: &[usize], input: &Input<'_>, s_start: f64, slice_id: i64, p: &Params) -> Vec<usize> {
     // Cross-section coordinates: u across, s along (from the slice start), z up.
     let pts: Vec<(usize, f64, f64, f64)> = idx
@@ -583,12 +592,15 @@ fn slice_pavement(idx: &[usize], input: &Input<'_>, s_start: f64, slice_id: i64,
                             on_road = true;
                             prev = w.level;
                             gap = 0.0;
-                        } else if width >= 0.8 && separation < p.reentry_min_separation_m {
+                        } else if width >= 0.8
+                            && separation < p.reentry_min_separation_m
+                            && w.level - prev <= SIDEWALK_MAX_STEP_M
+                        {
                             crossed_flat = true;
                         }
                     }
                     Some(_) => {
-                        if run.len() as f64 * p.window_m >= 0.8 {
+                        if run.len() as f64 * p.window_m >= 0.8 && run_prev - prev <= SIDEWALK_MAX_STEP_M {
                             crossed_flat = true;
                         }
                         run.clear();
@@ -994,6 +1006,57 @@ mod tests {
             assert!(u[i] < 4.05, "sidewalk point kept at u = {}", u[i]);
             assert!(z[i] < 0.02 * u[i] + 0.03 * m[i] + 0.1, "raised point kept");
         }
+    }
+
+    /// A van beside the scanner: its sides rise at u = 3 and 4.6, its 1.6 m wide roof is flat
+    /// at 0.9 m and shadows the road from u = 4.6 to 8; the road goes on from 8 to 14. A flat
+    /// strip that high is no sidewalk, so the road beyond the shadow is found again. The
+    /// same strip at curb height (+0.15 m, a sidewalk) still ends the search.
+    #[test]
+    fn the_road_beyond_a_vehicle_beside_the_scanner_is_found_again() {
+        let build = |top: f64| {
+            let (mut m, mut u, mut z) = (Vec::new(), Vec::new(), Vec::new());
+            let mut jit = crate::pipeline::geom::test_jitter(3);
+            for i in 0..80 {
+                let mm = i as f64 * 0.05;
+                for j in 0..680 {
+                    let uu = -3.0 + j as f64 * 0.025;
+                    let zz = if (3.0..4.6).contains(&uu) {
+                        top
+                    } else if (4.6..8.0).contains(&uu) {
+                        continue; // shadow: no points
+                    } else {
+                        0.0
+                    };
+                    m.push(mm + 0.01 * jit());
+                    u.push(uu + 0.005 * jit());
+                    z.push(zz + 0.004 * jit());
+                }
+                // The vehicle's (or curb's) faces.
+                for face in [3.0, 4.6] {
+                    for h in 0..(top / 0.025) as usize {
+                        m.push(mm + 0.01 * jit());
+                        u.push(face + 0.01 * jit());
+                        z.push(h as f64 * 0.025);
+                    }
+                }
+            }
+            (m, u, z)
+        };
+        let beyond = |top: f64| {
+            let (m, u, z) = build(top);
+            let kept = run_on(&m, &u, &z, &Params::default());
+            let near = kept.iter().filter(|&&i| u[i] < 2.9).count();
+            let far = kept.iter().filter(|&&i| u[i] > 8.5).count();
+            let on_top = kept.iter().filter(|&&i| (3.05..4.55).contains(&u[i])).count();
+            (near, far, on_top)
+        };
+        let (near, far, on_top) = beyond(0.9);
+        assert!(near > 10_000, "road beside the scanner: {near}");
+        assert!(far > 7_000, "road beyond the van: {far}");
+        assert_eq!(on_top, 0, "the van's roof is no road");
+        let (_, far, _) = beyond(0.15);
+        assert_eq!(far, 0, "beyond a sidewalk the search stops");
     }
 
     #[test]
