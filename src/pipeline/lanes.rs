@@ -476,8 +476,9 @@ pub fn grow_with_barriers(
 }
 
 /// Chains that run along the same painted line over a common stretch (fragments of a
-/// sparse far line linked into two interleaved chains) are one lane line: same test as
-/// `merge_overlaps`, on the chains' pooled samples.
+/// sparse far line linked into two interleaved chains, where one chain's fragments may
+/// fall in the other's gaps: its offset is interpolated there) are one lane line: same
+/// test as `merge_overlaps`, on the chains' pooled samples.
 fn merge_parallel_chains(items: &[Item], chains: Vec<Vec<usize>>) -> Vec<Vec<usize>> {
     let pooled: Vec<Item> = chains
         .iter()
@@ -498,14 +499,33 @@ fn merge_parallel_chains(items: &[Item], chains: Vec<Vec<usize>>) -> Vec<Vec<usi
     merge_overlaps(sorted).into_iter().map(|m| m.keys).collect()
 }
 
-/// Median offset of the samples of `so` with s in [a, b].
+/// Longest gap between a chain's samples across which [`median_offset_in`] interpolates (m).
+const INTERPOLATED_GAP_M: f64 = 20.0;
+
+/// Median offset of the samples of `so` (sorted by s) with s in [a, b]; when none lies
+/// there but `so` spans [a, b] (a chain's gap between two fragments, at most
+/// [`INTERPOLATED_GAP_M`]), the offset interpolated at its middle between the samples on
+/// either side.
 fn median_offset_in(so: &[[f64; 2]], a: f64, b: f64) -> Option<f64> {
     let mut v: Vec<f64> = so
         .iter()
         .filter(|q| q[0] >= a && q[0] <= b)
         .map(|q| q[1])
         .collect();
-    (!v.is_empty()).then(|| geom::median(&mut v))
+    if !v.is_empty() {
+        return Some(geom::median(&mut v));
+    }
+    let mid = 0.5 * (a + b);
+    let k = so.partition_point(|q| q[0] < mid);
+    (k > 0 && k < so.len() && so[k][0] - so[k - 1][0] <= INTERPOLATED_GAP_M).then(|| {
+        let (p, q) = (so[k - 1], so[k]);
+        let t = if q[0] > p[0] {
+            (mid - p[0]) / (q[0] - p[0])
+        } else {
+            0.5
+        };
+        p[1] + t * (q[1] - p[1])
+    })
 }
 
 /// Merge pieces that cover the same stretch of the same painted line (a line split
@@ -899,6 +919,38 @@ mod tests {
         let parallel = merge_overlaps(vec![ramp(0.0), dashes()]);
         assert_eq!(parallel.len(), 1);
         assert_eq!(parallel[0].keys, vec![0, 1]);
+    }
+
+    /// A sparse far line linked into two interleaved chains: one holds fragments at 0–2 m
+    /// and 18–22 m, the other one at 8–10 m, inside the first one's gap. They share no
+    /// sampled stretch, so the first chain's offset is interpolated across its gap: at the
+    /// same offset they are one line, 0.5 m beside it they are not, and across a gap longer
+    /// than `INTERPOLATED_GAP_M` nothing is interpolated.
+    #[test]
+    fn interleaved_chains_of_one_line_are_merged_across_their_gaps() {
+        let frags = |key: usize, spans: &[(f64, f64)], o: f64| Item {
+            keys: vec![key],
+            so: spans
+                .iter()
+                .flat_map(|&(a, b)| (0..=((b - a) / 0.25) as usize).map(move |i| [a + 0.25 * i as f64, o]))
+                .collect(),
+            width: 0.12,
+            conf: 0.8,
+        };
+        let outer = || frags(0, &[(0.0, 2.0), (18.0, 22.0)], 16.4);
+        assert_eq!(
+            merge_overlaps(vec![outer(), frags(1, &[(8.0, 10.0)], 16.43)]).len(),
+            1
+        );
+        assert_eq!(
+            merge_overlaps(vec![outer(), frags(1, &[(8.0, 10.0)], 16.9)]).len(),
+            2
+        );
+        let far_apart = frags(0, &[(0.0, 2.0), (28.0, 30.0)], 16.4);
+        assert_eq!(
+            merge_overlaps(vec![far_apart, frags(1, &[(12.0, 14.0)], 16.4)]).len(),
+            2
+        );
     }
 
     /// A 2/4 m dashed line seen in part (each dash read as 1–2 m, so lengths and gaps
