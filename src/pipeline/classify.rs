@@ -178,6 +178,10 @@ pub const LINE_WIDTH_SLACK_M: f64 = 0.15;
 /// below this from the interquartile range of its points (see `LineGeometry::paint_width_m`).
 pub const MIN_PAINT_WIDTH_M: f64 = 0.10;
 
+/// Largest ratio of a line's outline width (twice the IQR of its residuals) to the trimmed
+/// extent of the residuals (see `LineGeometry::paint_width_m`).
+pub const PAINT_WIDTH_OVER_EXTENT: f64 = 1.15;
+
 /// Share of a line piece's cross-sections that may be wider than its typical one (see
 /// `line_max_width_ratio`) before the piece is no line.
 pub const WIDE_SLICE_SHARE: f64 = 0.1;
@@ -225,10 +229,12 @@ pub struct LineGeometry {
     pub stations: Vec<[f64; 2]>,
     /// Painted width (robust extent of the residuals about the centreline).
     pub width_m: f64,
-    /// Width of the painted outline: `width_m`, or twice the interquartile range of the
-    /// residuals when that is smaller (paint points spread uniformly across a line, so the
-    /// IQR is half its width whatever a few percent of strays beside it do to the trimmed
-    /// extent). The rules judge by `width_m`; only the outline uses this.
+    /// Width of the painted outline: twice the interquartile range of the residuals (paint
+    /// points spread uniformly across a line, so the IQR is half its width whatever a few
+    /// percent of strays beside it do to the trimmed extent, and the centreline's own
+    /// noise does not shrink it), between [`MIN_PAINT_WIDTH_M`] and
+    /// [`PAINT_WIDTH_OVER_EXTENT`] × `width_m`; `width_m` itself with fewer than 40 points.
+    /// The rules judge by `width_m`; only the outline uses this.
     pub paint_width_m: f64,
     /// Length along the centreline.
     pub length_m: f64,
@@ -491,9 +497,16 @@ fn line_geometry(pts: &[[f64; 2]], refl: &RefLine, p: &Params) -> Option<LineGeo
         .fold(0.0, f64::max);
     let paint_width = if resid.len() >= 40 {
         let iqr = geom::quantile_sorted(&resid, 0.75) - geom::quantile_sorted(&resid, 0.25);
-        // Never below the narrowest painted line: a far line crossed by two scan rows
-        // has an IQR of about nothing.
-        width.min((2.0 * iqr * cosang).max(MIN_PAINT_WIDTH_M))
+        // The trimmed extent reads a dense line too narrow: the centreline follows the
+        // slice medians, which lean towards each slice's own points, so the residuals'
+        // tails shrink (a 0.20 m edge line 10 m out measured 0.178 m) while the IQR keeps
+        // half the width. Strays beside the line widen the extent, never the IQR. Never
+        // below the narrowest painted line (a far line crossed by two scan rows has an IQR
+        // of about nothing) and at most `PAINT_WIDTH_OVER_EXTENT` × the extent (paint
+        // points bunched at the line's two edges).
+        (2.0 * iqr * cosang)
+            .max(MIN_PAINT_WIDTH_M)
+            .min(PAINT_WIDTH_OVER_EXTENT * width)
     } else {
         width
     };
@@ -1044,5 +1057,37 @@ mod tests {
         let clean = paint(30.0, |_, y| y.abs() <= 0.075);
         let g = line_geometry(&clean, &r, &p).expect("a line");
         assert!((g.paint_width_m - g.width_m).abs() < 0.02);
+    }
+
+    /// A 0.20 m line sampled at random (about 12 points per 0.5 m) gets its painted width
+    /// as outline width. When the points bunch at the line's two edges (two narrow lines
+    /// read as one), twice the IQR overstates it: the outline is capped at
+    /// `PAINT_WIDTH_OVER_EXTENT` × the trimmed extent.
+    #[test]
+    fn the_outline_width_is_twice_the_iqr_within_bounds() {
+        let (r, p) = (refl(), Params::default());
+        let mut jit = geom::test_jitter(11);
+        let line: Vec<[f64; 2]> = (0..1200)
+            .map(|_| [50.0 * (jit() + 0.5), 2.0 + 0.2 * jit()])
+            .collect();
+        let g = line_geometry(&line, &r, &p).expect("a line");
+        assert!(
+            (g.paint_width_m - 0.2).abs() < 0.012,
+            "outline width {}",
+            g.paint_width_m
+        );
+        let edges: Vec<[f64; 2]> = (0..1200)
+            .map(|i| {
+                let side = if i % 2 == 0 { 1.0 } else { -1.0 };
+                [50.0 * (jit() + 0.5), 2.0 + side * (0.09 + 0.02 * jit())]
+            })
+            .collect();
+        let g = line_geometry(&edges, &r, &p).expect("a line");
+        assert!(
+            g.paint_width_m <= PAINT_WIDTH_OVER_EXTENT * g.width_m + 1e-9,
+            "outline {} extent {}",
+            g.paint_width_m,
+            g.width_m
+        );
     }
 }
