@@ -107,7 +107,8 @@ pub struct Params {
     pub max_offset_m: f64,
     /// Look for a second carriageway beyond the road edge (a median, barrier or occlusion).
     pub reenter: bool,
-    /// A flat strip at least this wide (m) …
+    /// A flat strip at least this wide (m) (or 1.6 m when it continues the road's plane:
+    /// the rest of a lane seen past a vehicle) …
     pub reentry_min_width_m: f64,
     /// … at least this far (m) beyond the edge, with no flat strip in between (a sidewalk;
     /// a flat strip more than 0.35 m above the road — a barrier top, a vehicle's roof — is
@@ -441,6 +442,14 @@ struct Window {
 /// a vehicle beside the scanner, and the road goes on beyond them.
 const SIDEWALK_MAX_STEP_M: f64 = 0.35;
 
+/// Beyond an occlusion, a flat strip narrower than `reentry_min_width_m` but at least this
+/// wide (m) is road again when its level continues the road's plane within the road
+/// thickness plus [`NARROW_REENTRY_SLOPE`] × its distance from the road edge: the rest of
+/// a lane seen past a vehicle, between the vehicle's shadow and a curb.
+const NARROW_REENTRY_MIN_WIDTH_M: f64 = 1.6;
+/// Cross-slope change (m per m) allowed between the road and such a strip.
+const NARROW_REENTRY_SLOPE: f64 = 0.02;
+
 fn slice_pavement(idx: &[usize], input: &Input<'_>, s_start: f64, slice_id: i64, p: &Params) -> Vec<usize> {
     // Cross-section coordinates: u across, s along (from the slice start), z up.
     let pts: Vec<(usize, f64, f64, f64)> = idx
@@ -578,7 +587,13 @@ fn slice_pavement(idx: &[usize], input: &Input<'_>, s_start: f64, slice_id: i64,
                         run_gap = 0.0;
                         let width = ((k - run[0]).abs() + 1) as f64 * p.window_m;
                         let separation = ((run[0] - last_road).abs() - 1) as f64 * p.window_m;
-                        if width >= p.reentry_min_width_m
+                        // A narrower strip is road too when it continues the road's own
+                        // plane (the lane beyond a vehicle, up to the next curb).
+                        let in_plane = (w.level - prev).abs()
+                            <= thickness + NARROW_REENTRY_SLOPE * (k - last_road).abs() as f64 * p.window_m;
+                        let wide_enough =
+                            width >= p.reentry_min_width_m || width >= NARROW_REENTRY_MIN_WIDTH_M && in_plane;
+                        if wide_enough
                             && separation >= p.reentry_min_separation_m
                             && !crossed_flat
                             && (w.level - prev).abs() <= p.reentry_max_step_m
@@ -1057,6 +1072,55 @@ mod tests {
         assert_eq!(on_top, 0, "the van's roof is no road");
         let (_, far, _) = beyond(0.15);
         assert_eq!(far, 0, "beyond a sidewalk the search stops");
+    }
+
+    /// Past a bus (roof 1.6 m, shadow from u = 4.6 to 10) only 2 m of the next lane are seen
+    /// before a 0.15 m curb and a sidewalk: narrower than `reentry_min_width_m`, but in the
+    /// road's plane, so it is road; the sidewalk beyond the curb is not. The same 2 m strip
+    /// 0.6 m below the road (a ditch) is not road.
+    #[test]
+    fn a_narrow_strip_of_road_past_a_vehicle_is_road_when_it_continues_the_plane() {
+        let build = |strip_z: f64| {
+            let (mut m, mut u, mut z) = (Vec::new(), Vec::new(), Vec::new());
+            let mut jit = crate::pipeline::geom::test_jitter(5);
+            for i in 0..80 {
+                let mm = i as f64 * 0.05;
+                for j in 0..720 {
+                    let uu = -3.0 + j as f64 * 0.025;
+                    let zz = if (3.0..4.6).contains(&uu) {
+                        1.6
+                    } else if (4.6..10.0).contains(&uu) {
+                        continue; // the bus's shadow
+                    } else if (10.0..12.0).contains(&uu) {
+                        strip_z
+                    } else if uu >= 12.0 {
+                        strip_z + 0.15 // curb and sidewalk
+                    } else {
+                        0.0
+                    };
+                    m.push(mm + 0.01 * jit());
+                    u.push(uu + 0.005 * jit());
+                    z.push(zz + 0.004 * jit());
+                }
+                for (face, top) in [(3.0, 1.6), (4.6, 1.6), (12.0, strip_z + 0.15)] {
+                    let base = if face < 10.0 { 0.0 } else { strip_z };
+                    for h in 0..((top - base) / 0.025) as usize {
+                        m.push(mm + 0.01 * jit());
+                        u.push(face + 0.01 * jit());
+                        z.push(base + h as f64 * 0.025);
+                    }
+                }
+            }
+            let kept = run_on(&m, &u, &z, &Params::default());
+            let strip = kept.iter().filter(|&&i| (10.1..11.9).contains(&u[i])).count();
+            let sidewalk = kept.iter().filter(|&&i| u[i] > 12.1).count();
+            (strip, sidewalk)
+        };
+        let (strip, sidewalk) = build(0.0);
+        assert!(strip > 4_000, "the lane past the bus: {strip}");
+        assert_eq!(sidewalk, 0, "the sidewalk beyond the curb");
+        let (strip, _) = build(-0.6);
+        assert_eq!(strip, 0, "a narrow strip below the road is no road");
     }
 
     #[test]
