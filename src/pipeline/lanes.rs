@@ -507,12 +507,14 @@ const INTERPOLATED_GAP_M: f64 = 20.0;
 /// [`INTERPOLATED_GAP_M`]), the offset interpolated at its middle between the samples on
 /// either side.
 fn median_offset_in(so: &[[f64; 2]], a: f64, b: f64) -> Option<f64> {
-    let mut v: Vec<f64> = so
-        .iter()
-        .filter(|q| q[0] >= a && q[0] <= b)
-        .map(|q| q[1])
-        .collect();
-    if !v.is_empty() {
+    // `merge_overlaps` asks this three times per overlapping pair: find the window by
+    // binary search instead of scanning every sample.
+    let (lo, hi) = (
+        so.partition_point(|q| q[0] < a),
+        so.partition_point(|q| q[0] <= b),
+    );
+    if lo < hi {
+        let mut v: Vec<f64> = so[lo..hi].iter().map(|q| q[1]).collect();
         return Some(geom::median(&mut v));
     }
     let mid = 0.5 * (a + b);
@@ -664,8 +666,8 @@ fn regimes(items: &[Item], chain: &[usize], p: &Params) -> Vec<(LaneLineClass, V
         // fragments has no such period.
         let regular_period = lens.len() >= 3 && {
             let centres: Vec<f64> = runs[i..=j].iter().map(|r| 0.5 * (r.0 + r.1)).collect();
-            let spacings: Vec<f64> = centres.windows(2).map(|w| w[1] - w[0]).collect();
-            let period = geom::median(&mut spacings.clone());
+            let mut spacings: Vec<f64> = centres.windows(2).map(|w| w[1] - w[0]).collect();
+            let period = geom::median(&mut spacings);
             let on_period = |x: f64| {
                 let k = (x / period).round();
                 (1.0..=2.0).contains(&k) && (x - k * period).abs() <= 0.15 * period

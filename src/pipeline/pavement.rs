@@ -442,6 +442,15 @@ struct Window {
 /// a vehicle beside the scanner, and the road goes on beyond them.
 const SIDEWALK_MAX_STEP_M: f64 = 0.35;
 
+/// Narrowest flat strip beyond the edge that counts as a sidewalk or verge (m).
+const SIDEWALK_MIN_WIDTH_M: f64 = 0.8;
+
+/// Whether a flat strip `width` m wide at `level`, beside road at `road_level`, is a
+/// sidewalk or verge (see [`SIDEWALK_MAX_STEP_M`]).
+fn sidewalk(width: f64, level: f64, road_level: f64) -> bool {
+    width >= SIDEWALK_MIN_WIDTH_M && level - road_level <= SIDEWALK_MAX_STEP_M
+}
+
 /// Beyond an occlusion, a flat strip narrower than `reentry_min_width_m` but at least this
 /// wide (m) is road again when its level continues the road's plane within the road
 /// thickness plus [`NARROW_REENTRY_SLOPE`] × its distance from the road edge: the rest of
@@ -607,15 +616,12 @@ fn slice_pavement(idx: &[usize], input: &Input<'_>, s_start: f64, slice_id: i64,
                             on_road = true;
                             prev = w.level;
                             gap = 0.0;
-                        } else if width >= 0.8
-                            && separation < p.reentry_min_separation_m
-                            && w.level - prev <= SIDEWALK_MAX_STEP_M
-                        {
+                        } else if separation < p.reentry_min_separation_m && sidewalk(width, w.level, prev) {
                             crossed_flat = true;
                         }
                     }
                     Some(_) => {
-                        if run.len() as f64 * p.window_m >= 0.8 && run_prev - prev <= SIDEWALK_MAX_STEP_M {
+                        if sidewalk(run.len() as f64 * p.window_m, run_prev, prev) {
                             crossed_flat = true;
                         }
                         run.clear();
@@ -1023,43 +1029,50 @@ mod tests {
         }
     }
 
+    /// A 4 m stretch of cross-sections from u = -3: the surface height at `u`
+    /// (`None`: no return there, a shadow) every 2.5 cm, and vertical faces
+    /// `(u, from z, to z)`; all jittered deterministically by `seed`.
+    fn cross_section(
+        u_max: f64,
+        surface: impl Fn(f64) -> Option<f64>,
+        faces: &[(f64, f64, f64)],
+        seed: u64,
+    ) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+        let (mut m, mut u, mut z) = (Vec::new(), Vec::new(), Vec::new());
+        let mut jit = crate::pipeline::geom::test_jitter(seed);
+        for i in 0..80 {
+            let mm = i as f64 * 0.05;
+            for j in 0..((u_max + 3.0) / 0.025) as usize {
+                let uu = -3.0 + j as f64 * 0.025;
+                let Some(zz) = surface(uu) else { continue };
+                m.push(mm + 0.01 * jit());
+                u.push(uu + 0.005 * jit());
+                z.push(zz + 0.004 * jit());
+            }
+            for &(face, from, to) in faces {
+                for h in 0..((to - from) / 0.025) as usize {
+                    m.push(mm + 0.01 * jit());
+                    u.push(face + 0.01 * jit());
+                    z.push(from + h as f64 * 0.025);
+                }
+            }
+        }
+        (m, u, z)
+    }
+
     /// A van beside the scanner: its sides rise at u = 3 and 4.6, its 1.6 m wide roof is flat
     /// at 0.9 m and shadows the road from u = 4.6 to 8; the road goes on from 8 to 14. A flat
     /// strip that high is no sidewalk, so the road beyond the shadow is found again. The
     /// same strip at curb height (+0.15 m, a sidewalk) still ends the search.
     #[test]
     fn the_road_beyond_a_vehicle_beside_the_scanner_is_found_again() {
-        let build = |top: f64| {
-            let (mut m, mut u, mut z) = (Vec::new(), Vec::new(), Vec::new());
-            let mut jit = crate::pipeline::geom::test_jitter(3);
-            for i in 0..80 {
-                let mm = i as f64 * 0.05;
-                for j in 0..680 {
-                    let uu = -3.0 + j as f64 * 0.025;
-                    let zz = if (3.0..4.6).contains(&uu) {
-                        top
-                    } else if (4.6..8.0).contains(&uu) {
-                        continue; // shadow: no points
-                    } else {
-                        0.0
-                    };
-                    m.push(mm + 0.01 * jit());
-                    u.push(uu + 0.005 * jit());
-                    z.push(zz + 0.004 * jit());
-                }
-                // The vehicle's (or curb's) faces.
-                for face in [3.0, 4.6] {
-                    for h in 0..(top / 0.025) as usize {
-                        m.push(mm + 0.01 * jit());
-                        u.push(face + 0.01 * jit());
-                        z.push(h as f64 * 0.025);
-                    }
-                }
-            }
-            (m, u, z)
-        };
         let beyond = |top: f64| {
-            let (m, u, z) = build(top);
+            let surface = |u: f64| match u {
+                u if (3.0..4.6).contains(&u) => Some(top),
+                u if (4.6..8.0).contains(&u) => None, // shadow: no points
+                _ => Some(0.0),
+            };
+            let (m, u, z) = cross_section(14.0, surface, &[(3.0, 0.0, top), (4.6, 0.0, top)], 3);
             let kept = run_on(&m, &u, &z, &Params::default());
             let near = kept.iter().filter(|&&i| u[i] < 2.9).count();
             let far = kept.iter().filter(|&&i| u[i] > 8.5).count();
@@ -1081,36 +1094,15 @@ mod tests {
     #[test]
     fn a_narrow_strip_of_road_past_a_vehicle_is_road_when_it_continues_the_plane() {
         let build = |strip_z: f64| {
-            let (mut m, mut u, mut z) = (Vec::new(), Vec::new(), Vec::new());
-            let mut jit = crate::pipeline::geom::test_jitter(5);
-            for i in 0..80 {
-                let mm = i as f64 * 0.05;
-                for j in 0..720 {
-                    let uu = -3.0 + j as f64 * 0.025;
-                    let zz = if (3.0..4.6).contains(&uu) {
-                        1.6
-                    } else if (4.6..10.0).contains(&uu) {
-                        continue; // the bus's shadow
-                    } else if (10.0..12.0).contains(&uu) {
-                        strip_z
-                    } else if uu >= 12.0 {
-                        strip_z + 0.15 // curb and sidewalk
-                    } else {
-                        0.0
-                    };
-                    m.push(mm + 0.01 * jit());
-                    u.push(uu + 0.005 * jit());
-                    z.push(zz + 0.004 * jit());
-                }
-                for (face, top) in [(3.0, 1.6), (4.6, 1.6), (12.0, strip_z + 0.15)] {
-                    let base = if face < 10.0 { 0.0 } else { strip_z };
-                    for h in 0..((top - base) / 0.025) as usize {
-                        m.push(mm + 0.01 * jit());
-                        u.push(face + 0.01 * jit());
-                        z.push(base + h as f64 * 0.025);
-                    }
-                }
-            }
+            let surface = |u: f64| match u {
+                u if (3.0..4.6).contains(&u) => Some(1.6),
+                u if (4.6..10.0).contains(&u) => None, // the bus's shadow
+                u if (10.0..12.0).contains(&u) => Some(strip_z),
+                u if u >= 12.0 => Some(strip_z + 0.15), // curb and sidewalk
+                _ => Some(0.0),
+            };
+            let faces = [(3.0, 0.0, 1.6), (4.6, 0.0, 1.6), (12.0, strip_z, strip_z + 0.15)];
+            let (m, u, z) = cross_section(15.0, surface, &faces, 5);
             let kept = run_on(&m, &u, &z, &Params::default());
             let strip = kept.iter().filter(|&&i| (10.1..11.9).contains(&u[i])).count();
             let sidewalk = kept.iter().filter(|&&i| u[i] > 12.1).count();
