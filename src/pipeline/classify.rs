@@ -26,7 +26,8 @@
 //! 2. Broken lines are re-joined (Pan 2019): line pieces and short narrow fragments whose
 //!    ends are ≤ `join_gap_m` apart along the trajectory, at the same offset (prediction
 //!    from the piece's slope) and of similar width are merged (mutual best match), so a
-//!    sparse far line or a worn dash is one object.
+//!    sparse far line or a worn dash is one object. Line pieces read as sparse points
+//!    (under [`SPARSE_LINE_POINTS_PER_M`]) are joined across up to `join_sparse_gap_m`.
 //! 3. Rules (first match wins):
 //!    - tiny (few points or area) → dropped; compact blobs ≤ `blob_max_size_m` with aspect
 //!      < 1.6 (manhole covers, ~0.6–0.8 m round) → dropped;
@@ -97,6 +98,11 @@ pub struct Params {
     /// Broken pieces of one line with ends at most this far apart are re-joined (m).
     /// Default 0.8 (real dash gaps are ≥ 1.5 m).
     pub join_gap_m: f64,
+    /// Line pieces read as sparse points (fewer than [`SPARSE_LINE_POINTS_PER_M`] points per
+    /// metre: a line at long range, or seen through traffic) are re-joined across gaps up to
+    /// this (m). Default 2.5: below the shortest gap of a dashed lane line (3 m), above
+    /// most gaps between the sparse pieces of one far line.
+    pub join_sparse_gap_m: f64,
     /// Elongated leftovers steeper than this to the trajectory are noise (deg). Default 45.
     pub noise_angle_deg: f64,
     /// Stop line width range (m). Defaults 0.15–0.65 (GB 0.2–0.4, MUTCD 0.3–0.6).
@@ -120,6 +126,7 @@ impl Default for Params {
             solid_min_ratio: 20.0,
             dash_min_length_m: 0.8,
             join_gap_m: 0.8,
+            join_sparse_gap_m: 2.5,
             noise_angle_deg: 45.0,
             stop_min_width_m: 0.15,
             stop_max_width_m: 0.65,
@@ -142,6 +149,7 @@ impl Params {
             ("solid_min_ratio", self.solid_min_ratio, 1.0, 1000.0),
             ("dash_min_length_m", self.dash_min_length_m, 0.0, 50.0),
             ("join_gap_m", self.join_gap_m, 0.0, 10.0),
+            ("join_sparse_gap_m", self.join_sparse_gap_m, 0.0, 10.0),
             ("noise_angle_deg", self.noise_angle_deg, 0.0, 90.0),
             ("stop_min_width_m", self.stop_min_width_m, 0.0, 5.0),
             ("stop_max_width_m", self.stop_max_width_m, 0.0, 5.0),
@@ -718,6 +726,10 @@ fn piece_end(c: &Candidate, p: &Params) -> Option<End> {
     None
 }
 
+/// Points per metre below which a line piece counts as sparse for the re-joining.
+/// A lane line near the scanner holds hundreds per metre; one 25 m out, 5–20.
+pub const SPARSE_LINE_POINTS_PER_M: f64 = 40.0;
+
 /// Merge broken pieces of one line (mutual best successor within `join_gap_m`).
 fn rejoin(
     feats: Vec<Candidate>,
@@ -735,10 +747,28 @@ fn rejoin(
         let (ea, eb) = (ends[a].as_ref().expect("end"), ends[b].as_ref().expect("end"));
         ea.s0.total_cmp(&eb.s0).then(a.cmp(&b))
     });
+    // Sparse line pieces may be joined across longer gaps (`join_sparse_gap_m`).
+    let sparse: Vec<bool> = feats
+        .iter()
+        .map(|c| {
+            c.line.as_ref().is_some_and(|l| {
+                (c.shape.point_count as f64) < SPARSE_LINE_POINTS_PER_M * l.length_m.max(c.shape.length_m)
+            })
+        })
+        .collect();
+    let max_gap = |a: usize, b: usize| {
+        if sparse[a] && sparse[b] {
+            p.join_gap_m.max(p.join_sparse_gap_m)
+        } else {
+            p.join_gap_m
+        }
+    };
+    let window = p.join_gap_m.max(p.join_sparse_gap_m);
     let cost = |a: usize, b: usize| -> Option<f64> {
         let (ea, eb) = (ends[a].as_ref()?, ends[b].as_ref()?);
         let gap = eb.s0 - ea.s1;
-        if gap < -0.2 || gap > p.join_gap_m {
+        let limit = max_gap(a, b);
+        if gap < -0.2 || gap > limit {
             return None;
         }
         let pred = ea.o1 + ea.slope * gap.max(0.0);
@@ -750,7 +780,7 @@ fn rejoin(
         {
             return None;
         }
-        Some(dev / tol + gap.max(0.0) / p.join_gap_m)
+        Some(dev / tol + gap.max(0.0) / limit)
     };
     // Candidate successors are the next pieces in mileage order (window bounded by the gap).
     let n = feats.len();
@@ -760,7 +790,7 @@ fn rejoin(
         let ea = ends[a].as_ref().expect("end");
         for &b in &order[oi + 1..] {
             let eb = ends[b].as_ref().expect("end");
-            if eb.s0 > ea.s1 + p.join_gap_m {
+            if eb.s0 > ea.s1 + window {
                 break;
             }
             if let Some(c) = cost(a, b) {
@@ -992,6 +1022,48 @@ mod tests {
             }
         }
         v
+    }
+
+    /// Pieces of one line 1.8 m apart: re-joined when they are read as sparse points (a
+    /// far line, 5 points per metre), kept apart when dense (near dashes of a short-gap
+    /// pattern are no occlusion); sparse pieces 3.5 m apart (a dash gap) stay apart too.
+    #[test]
+    fn sparse_pieces_of_a_line_rejoin_across_longer_gaps() {
+        let (r, p) = (refl(), Params::default());
+        let pieces = |starts: &[f64], dense: bool| -> (Vec<[f64; 2]>, Vec<Vec<usize>>) {
+            let (mut xy, mut groups) = (Vec::new(), Vec::new());
+            for &x0 in starts {
+                let pts: Vec<[f64; 2]> = if dense {
+                    paint(2.0, |_, y| y.abs() <= 0.075)
+                        .into_iter()
+                        .map(|q| [q[0] + x0, q[1]])
+                        .collect()
+                } else {
+                    (0..=10)
+                        .map(|k| [x0 + 0.2 * k as f64, 2.0 + 0.05 * ((k * 7 % 5) as f64 / 4.0 - 0.5)])
+                        .collect()
+                };
+                groups.push((xy.len()..xy.len() + pts.len()).collect());
+                xy.extend(pts);
+            }
+            (xy, groups)
+        };
+        let joined = |starts: &[f64], dense: bool| {
+            let (xy, groups) = pieces(starts, dense);
+            let intensity = vec![100.0f32; xy.len()];
+            let feats: Vec<Candidate> = groups
+                .into_iter()
+                .map(|g| describe(&xy, &intensity, g, &r, &p))
+                .collect();
+            assert!(
+                feats.iter().all(|c| c.line.is_some()),
+                "every piece is a line piece"
+            );
+            rejoin(feats, &xy, &intensity, &r, &p).len()
+        };
+        assert_eq!(joined(&[2.0, 5.8, 9.6], false), 1, "sparse, 1.8 m gaps");
+        assert_eq!(joined(&[2.0, 5.8, 9.6], true), 3, "dense, 1.8 m gaps");
+        assert_eq!(joined(&[2.0, 7.5, 13.0], false), 3, "sparse, 3.5 m gaps");
     }
 
     /// A straight arrow (4 m shaft 0.25 m wide, 2 m head 0.75 m wide at its base) is no

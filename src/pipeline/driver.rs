@@ -544,6 +544,7 @@ fn marking_points(
             let seg = threshold::segment(&raster, &p.threshold);
             drop(raster);
             let mut marks = threshold::points_from_mask(&seg, &px, py, &values, &p.threshold);
+            threshold::rescue_sparse_lines(&px, py, &values, &mut marks, &p.threshold);
             let z = gather_f64(&c.z);
             threshold::clear_unflat(&px, py, &z, &mut marks, &p.threshold);
             // Bright verge beyond the asphalt: candidates lying below the road beside them.

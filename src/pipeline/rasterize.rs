@@ -13,7 +13,10 @@
 //!    (head, slice, bin) is the `background_percentile` of the histograms of the slices
 //!    within `background_window_slices` on either side — a robust statistic, because
 //!    paint covers far less than half of a 1 m wide, 10 m long strip of road. Sparse
-//!    strips borrow from neighbouring offset bins, then from the whole head. Each point's
+//!    strips borrow from neighbouring offset bins, then from the whole head. At long range
+//!    weak asphalt returns drop out and a strip holding a line can be mostly paint by
+//!    count, so a strip's background is the median of its own and its two neighbours'
+//!    across the road (the lower of two at the edge). Each point's
 //!    background is bilinearly interpolated (mileage × offset) between strip centres, and
 //!    the point's value becomes `intensity / background` (asphalt ≈ 1, paint ≫ 1). Nothing
 //!    assumes a particular range law, so it carries over to other scanners and roads.
@@ -355,6 +358,32 @@ pub fn normalise(input: &BackgroundInput<'_>, params: &Params) -> Vec<f32> {
                 f32::NAN
             } else {
                 hist_quantile(&acc, total, q)
+            }
+        })
+        .collect();
+
+    // Paint returns more points than dark asphalt at long range (weak returns drop out),
+    // so a far strip holding a line can be mostly paint by point count and its median read
+    // as paint. Paint never fills three neighbouring 1 m bins of one strip except on a
+    // crosswalk or a symbol, which the median of three keeps as before: a strip's
+    // background is the median of its own value and its two neighbours' across the road,
+    // the lower of the two where one neighbour is missing (a contaminated strip only reads
+    // too bright).
+    let bg: Vec<f32> = (0..nh * ns * nb)
+        .into_par_iter()
+        .map(|k| {
+            let b = k % nb;
+            let own = bg[k];
+            if !own.is_finite() {
+                return own;
+            }
+            let left = if b > 0 { bg[k - 1] } else { f32::NAN };
+            let right = if b + 1 < nb { bg[k + 1] } else { f32::NAN };
+            match (left.is_finite(), right.is_finite()) {
+                (true, true) => own.max(left.min(right)).min(left.max(right)),
+                (true, false) => own.min(left),
+                (false, true) => own.min(right),
+                (false, false) => own,
             }
         })
         .collect();
@@ -963,6 +992,50 @@ mod tests {
         // Higher power sharpens further.
         let r3 = idw(&xs, &ys, &[10.0, 0.0], &Params { power: 3.0, ..p });
         assert!(*r3.get(c, rr) > v);
+    }
+
+    /// Far range: weak asphalt returns drop out, so the 1 m strip holding a line returns
+    /// more paint points than asphalt ones and its own median is paint. The median of it and
+    /// its neighbours across the road is asphalt, and the line stands out at 3x.
+    #[test]
+    fn a_strip_mostly_paint_by_count_takes_its_neighbours_background() {
+        let (mut intensity, mut offset, mut slice, mut scanner) =
+            (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        for s in 0..10i64 {
+            // asphalt: 10 points per 1 m strip and slice from 23 to 29 m (intensity 20)
+            for k in 0..60 {
+                intensity.push(20.0);
+                offset.push(23.0 + 6.0 * (k as f64 + 0.5) / 60.0);
+                slice.push(s);
+                scanner.push(0);
+            }
+            // a line at 26.5 m: 25 paint points per slice (intensity 60)
+            for k in 0..25 {
+                intensity.push(60.0);
+                offset.push(26.42 + 0.16 * (k as f64 + 0.5) / 25.0);
+                slice.push(s);
+                scanner.push(0);
+            }
+        }
+        let input = BackgroundInput {
+            intensity: &intensity,
+            scanner: &scanner,
+            slice: &slice,
+            offset: &offset,
+        };
+        let v = normalise(&input, &Params::default());
+        for i in 0..v.len() {
+            if intensity[i] > 30.0 {
+                assert!(v[i] > 2.7, "paint at {} normalised to {}", offset[i], v[i]);
+            } else {
+                assert!(
+                    (0.9..1.1).contains(&v[i]),
+                    "asphalt at {} normalised to {}",
+                    offset[i],
+                    v[i]
+                );
+            }
+        }
     }
 
     /// A bright stripe under a strong range gradient: raw intensity of the far stripe is

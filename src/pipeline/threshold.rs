@@ -37,6 +37,13 @@
 //!    max(`flat_min_spread_m`, `flat_noise_factor` × the median spread of the marked cells)
 //!    are cleared: the bright foot of a barrier or curb face, wheels, bumpers.
 //!
+//! 6. *Sparse-line rescue* ([`rescue_sparse_lines`]): at long range a line is a row of
+//!    isolated points that the raster turns into lone discs (dropped by the blob rule, as
+//!    they should be where they stand alone). Where the pavement holds fewer than
+//!    `sparse_max_density` points per m², a point at least `sparse_min_value` bright with
+//!    `sparse_min_support` others as bright at its offset (± `sparse_across_m`) within
+//!    `sparse_along_m` along the trajectory is paint. It runs before the flatness check.
+//!
 //! `method: "none"` skips 1–3 and keeps every pavement point (for inputs that were
 //! thresholded upstream).
 //!
@@ -44,7 +51,9 @@
 //! best (s, t) ≈ (10–12, 1.27–1.29)), `gaussian_sigma_px` 1.0, `min_contrast` 1.25,
 //! `bridge_nodata_m` 0.3, `min_component_area_m2` 0.03, `blob_max_length_m` 1.2,
 //! `blob_max_elongation` 2.0, `blob_min_fill` 0.7, `point_contrast_fraction` 0.3,
-//! `flat_cell_m` 0.2, `flat_noise_factor` 4 (0 = off), `flat_min_spread_m` 0.06.
+//! `flat_cell_m` 0.2, `flat_noise_factor` 4 (0 = off), `flat_min_spread_m` 0.06,
+//! `sparse_min_value` 2 (0 = off), `sparse_max_density` 40, `sparse_along_m` 1.5,
+//! `sparse_across_m` 0.08, `sparse_min_support` 2.
 //!
 //! **Reference.** Bradley D., Roth G. (2007) Adaptive thresholding using the integral image,
 //! J. Graphics Tools 12(2); Yao et al. (2019, 2021); Pan et al. (2019) ISPRS J.
@@ -116,6 +125,16 @@ pub struct Params {
     /// marking points) hold no paint (0 turns the check off).
     pub flat_noise_factor: f64,
     pub flat_min_spread_m: f64,
+    /// Sparse-line rescue (step 6 of the module docs; 0 turns it off): an unmarked pavement
+    /// point at least this bright (× asphalt background) …
+    pub sparse_min_value: f64,
+    /// … in a 0.5 m cell of fewer pavement points per m² than this (far range) …
+    pub sparse_max_density: f64,
+    /// … with at least `sparse_min_support` other such points within `sparse_along_m`
+    /// along the trajectory and `sparse_across_m` across it is a marking point.
+    pub sparse_along_m: f64,
+    pub sparse_across_m: f64,
+    pub sparse_min_support: u32,
 }
 
 impl Default for Params {
@@ -141,6 +160,11 @@ impl Default for Params {
             flat_cell_m: 0.2,
             flat_noise_factor: 4.0,
             flat_min_spread_m: 0.06,
+            sparse_min_value: 2.0,
+            sparse_max_density: 40.0,
+            sparse_along_m: 1.5,
+            sparse_across_m: 0.08,
+            sparse_min_support: 2,
         }
     }
 }
@@ -187,6 +211,16 @@ impl Params {
         check_range("flat_cell_m", self.flat_cell_m, 0.02, 2.0)?;
         check_range("flat_noise_factor", self.flat_noise_factor, 0.0, 100.0)?;
         check_range("flat_min_spread_m", self.flat_min_spread_m, 0.0, 10.0)?;
+        check_range("sparse_min_value", self.sparse_min_value, 0.0, 100.0)?;
+        check_range("sparse_max_density", self.sparse_max_density, 0.0, 1.0e6)?;
+        check_range("sparse_along_m", self.sparse_along_m, 0.05, 10.0)?;
+        check_range("sparse_across_m", self.sparse_across_m, 0.01, 1.0)?;
+        if !(1..=100).contains(&self.sparse_min_support) {
+            return Err(format!(
+                "sparse_min_support: must be within 1..=100, got {}",
+                self.sparse_min_support
+            ));
+        }
         Ok(())
     }
 
@@ -201,7 +235,7 @@ impl Params {
             + self.window_radius_px as f64
             + 2.0 * (self.close_radius_px + self.open_radius_px) as f64
             + 1.0;
-        px * cell_m
+        (px * cell_m).max(self.sparse_along_m)
     }
 }
 
@@ -718,6 +752,85 @@ pub fn points_from_mask(seg: &Segmentation, xs: &[f64], ys: &[f64], values: &[f3
         .collect()
 }
 
+/// Cell side (m) of the density grid of the sparse-line rescue.
+const SPARSE_CELL_M: f64 = 0.5;
+/// Support points of the sparse-line rescue must spread at least this far along (m), so
+/// that one bright spot (a stud, a stone) does not support itself.
+const SPARSE_MIN_SPREAD_M: f64 = 0.15;
+
+/// Sparse-line rescue (step 6 of the module docs): at long range a painted line is a row
+/// of isolated points, 0.3–3 m apart, each several times brighter than the asphalt. In the
+/// raster each one is a lone 0.3 m disc that the blob rule rightly drops (a lone disc is
+/// what a manhole or a stone looks like) and Bradley–Roth compares with a window that holds
+/// little but paint. Here, in sparse cells only (fewer than `sparse_max_density` pavement
+/// points per m², where the raster cannot resolve the line), a point at least
+/// `sparse_min_value` bright is paint when at least `sparse_min_support` other such points
+/// lie at its offset (± `sparse_across_m`) within `sparse_along_m` along the trajectory,
+/// spread along it: bright asphalt noise is rare (well under 1 % of far points at twice
+/// the background) and is not aligned with the trajectory. `m`, `o` are the points'
+/// mileage and offset; returns how many points were added.
+///
+/// Hand-written: a hash grid over the few bright sparse points, O(points).
+pub fn rescue_sparse_lines(m: &[f64], o: &[f64], values: &[f32], is_mark: &mut [bool], p: &Params) -> usize {
+    use std::collections::HashMap;
+    if p.sparse_min_value <= 0.0 || m.is_empty() {
+        return 0;
+    }
+    let cell = |v: f64, size: f64| (v / size).floor() as i64;
+    let mut density: HashMap<(i64, i64), u32> = HashMap::new();
+    for (&a, &b) in m.iter().zip(o) {
+        if a.is_finite() && b.is_finite() {
+            *density
+                .entry((cell(a, SPARSE_CELL_M), cell(b, SPARSE_CELL_M)))
+                .or_default() += 1;
+        }
+    }
+    let max_count = p.sparse_max_density * SPARSE_CELL_M * SPARSE_CELL_M;
+    let bright: Vec<usize> = (0..m.len())
+        .filter(|&i| {
+            values[i].is_finite()
+                && values[i] as f64 >= p.sparse_min_value
+                && m[i].is_finite()
+                && o[i].is_finite()
+                && density
+                    .get(&(cell(m[i], SPARSE_CELL_M), cell(o[i], SPARSE_CELL_M)))
+                    .is_some_and(|&c| (c as f64) < max_count)
+        })
+        .collect();
+    let (ca, cx) = (p.sparse_along_m, p.sparse_across_m);
+    let mut grid: HashMap<(i64, i64), Vec<usize>> = HashMap::new();
+    for &i in &bright {
+        grid.entry((cell(m[i], ca), cell(o[i], cx))).or_default().push(i);
+    }
+    let need = p.sparse_min_support as usize;
+    let add: Vec<usize> = bright
+        .par_iter()
+        .copied()
+        .filter(|&i| !is_mark[i])
+        .filter(|&i| {
+            let (gi, gj) = (cell(m[i], ca), cell(o[i], cx));
+            let mut support = 0;
+            let mut spread = false;
+            for di in -1..=1 {
+                for dj in -1..=1 {
+                    for &k in grid.get(&(gi + di, gj + dj)).map_or(&[][..], |v| v) {
+                        let dm = (m[k] - m[i]).abs();
+                        if k != i && dm <= ca && (o[k] - o[i]).abs() <= cx {
+                            support += 1;
+                            spread |= dm >= SPARSE_MIN_SPREAD_M;
+                        }
+                    }
+                }
+            }
+            support >= need && spread
+        })
+        .collect();
+    for &i in &add {
+        is_mark[i] = true;
+    }
+    add.len()
+}
+
 /// Flatness check (step 5 of the module docs): paint lies flat on the road, so marking
 /// points in a cell whose pavement points spread in height like a vertical face (the
 /// bright foot of a barrier or curb, a wheel, a bumper kept by the road buffer) are
@@ -1115,6 +1228,83 @@ mod tests {
         let vals = [3.1, 1.1, 3.0];
         let got = points_from_mask(&seg, &xs, &ys, &vals, &Params::default());
         assert_eq!(got, vec![true, false, false]);
+    }
+
+    /// A far line read as single points 0.4-1.2 m apart (value 3) among asphalt (value 1),
+    /// with bright noise points at random: the line's points are rescued, the noise (not
+    /// aligned) and a bright pair at one spot are not, and nothing is rescued where the
+    /// points are dense (the raster resolves paint there) or with the rescue off.
+    #[test]
+    fn sparse_aligned_bright_points_are_paint_and_lone_ones_are_not() {
+        let (mut m, mut o, mut v) = (Vec::new(), Vec::new(), Vec::new());
+        let mut rng = 12345u64;
+        let mut rnd = || {
+            rng = rng
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (rng >> 11) as f64 / (1u64 << 53) as f64
+        };
+        // asphalt: 8 points per m² over 40 m x 6 m (offsets 23..29)
+        for _ in 0..1920 {
+            m.push(40.0 * rnd());
+            o.push(23.0 + 6.0 * rnd());
+            v.push(1.0f32);
+        }
+        let first_line = m.len();
+        let mut s = 0.3;
+        while s < 40.0 {
+            m.push(s);
+            o.push(26.5 + 0.05 * (rnd() - 0.5));
+            v.push(3.0);
+            s += 0.4 + 0.8 * rnd();
+        }
+        let end_line = m.len();
+        // bright noise: isolated points away from the line, and a pair at one spot
+        let noise = [
+            (5.0, 24.0),
+            (12.0, 25.1),
+            (20.0, 27.8),
+            (33.0, 23.6),
+            (37.0, 28.4),
+        ];
+        for (a, b) in noise {
+            m.push(a);
+            o.push(b);
+            v.push(3.0);
+        }
+        m.extend([15.0, 15.05]);
+        o.extend([24.6, 24.62]);
+        v.extend([3.0f32, 3.0]);
+        let n = m.len();
+        let mut marks = vec![false; n];
+        let added = rescue_sparse_lines(&m, &o, &v, &mut marks, &Params::default());
+        let line_found = (first_line..end_line).filter(|&i| marks[i]).count();
+        assert!(
+            line_found as f64 >= 0.9 * (end_line - first_line) as f64,
+            "{line_found} of {} line points",
+            end_line - first_line
+        );
+        assert!(marks[end_line..].iter().all(|&b| !b), "noise rescued");
+        assert!(marks[..first_line].iter().all(|&b| !b), "asphalt rescued");
+        assert_eq!(added, line_found);
+        // dense: the same line inside 400 asphalt points per m² is left to the raster
+        let (mut md, mut od, mut vd) = (m.clone(), o.clone(), v.clone());
+        for k in 0..96_000 {
+            md.push(40.0 * (k as f64 + 0.5) / 96_000.0);
+            od.push(23.0 + 6.0 * rnd());
+            vd.push(1.0);
+        }
+        let mut dense = vec![false; md.len()];
+        assert_eq!(
+            rescue_sparse_lines(&md, &od, &vd, &mut dense, &Params::default()),
+            0
+        );
+        let off = Params {
+            sparse_min_value: 0.0,
+            ..Params::default()
+        };
+        let mut none = vec![false; n];
+        assert_eq!(rescue_sparse_lines(&m, &o, &v, &mut none, &off), 0);
     }
 
     #[test]
