@@ -777,25 +777,64 @@ pub fn rescue_sparse_lines(m: &[f64], o: &[f64], values: &[f32], is_mark: &mut [
         return 0;
     }
     let cell = |v: f64, size: f64| (v / size).floor() as i64;
-    let mut density: HashMap<(i64, i64), u32> = HashMap::new();
-    for (&a, &b) in m.iter().zip(o) {
-        if a.is_finite() && b.is_finite() {
-            *density
-                .entry((cell(a, SPARSE_CELL_M), cell(b, SPARSE_CELL_M)))
-                .or_default() += 1;
+    let is_bright = |i: usize| {
+        values[i].is_finite()
+            && values[i] as f64 >= p.sparse_min_value
+            && m[i].is_finite()
+            && o[i].is_finite()
+    };
+    let bright: Vec<usize> = (0..m.len()).into_par_iter().filter(|&i| is_bright(i)).collect();
+    if bright.is_empty() {
+        return 0;
+    }
+    // Pavement points per density cell, counted only in the cells of bright points.
+    let key = |i: usize| (cell(m[i], SPARSE_CELL_M), cell(o[i], SPARSE_CELL_M));
+    let mut slot: HashMap<(i64, i64), usize> = HashMap::new();
+    for &i in &bright {
+        let n = slot.len();
+        slot.entry(key(i)).or_insert(n);
+    }
+    let (i_lo, i_hi, j_lo, j_hi) = slot
+        .keys()
+        .fold((i64::MAX, i64::MIN, i64::MAX, i64::MIN), |a, &(i, j)| {
+            (a.0.min(i), a.1.max(i), a.2.min(j), a.3.max(j))
+        });
+    // A dense index over the bright cells' bounding box when it is small (it spans one
+    // chunk), so that counting every point needs no hashing.
+    let (w, h) = ((i_hi - i_lo + 1) as usize, (j_hi - j_lo + 1) as usize);
+    let dense: Option<Vec<u32>> = (w.saturating_mul(h) <= 1 << 24).then(|| {
+        let mut d = vec![u32::MAX; w * h];
+        for (&(i, j), &k) in &slot {
+            d[(i - i_lo) as usize * h + (j - j_lo) as usize] = k as u32;
+        }
+        d
+    });
+    let slot_of = |i: usize| -> Option<usize> {
+        if !(m[i].is_finite() && o[i].is_finite()) {
+            return None;
+        }
+        let (ci, cj) = key(i);
+        match &dense {
+            Some(d) => {
+                if ci < i_lo || ci > i_hi || cj < j_lo || cj > j_hi {
+                    return None;
+                }
+                let k = d[(ci - i_lo) as usize * h + (cj - j_lo) as usize];
+                (k != u32::MAX).then_some(k as usize)
+            }
+            None => slot.get(&(ci, cj)).copied(),
+        }
+    };
+    let mut count = vec![0u32; slot.len()];
+    for i in 0..m.len() {
+        if let Some(k) = slot_of(i) {
+            count[k] += 1;
         }
     }
     let max_count = p.sparse_max_density * SPARSE_CELL_M * SPARSE_CELL_M;
-    let bright: Vec<usize> = (0..m.len())
-        .filter(|&i| {
-            values[i].is_finite()
-                && values[i] as f64 >= p.sparse_min_value
-                && m[i].is_finite()
-                && o[i].is_finite()
-                && density
-                    .get(&(cell(m[i], SPARSE_CELL_M), cell(o[i], SPARSE_CELL_M)))
-                    .is_some_and(|&c| (c as f64) < max_count)
-        })
+    let bright: Vec<usize> = bright
+        .into_iter()
+        .filter(|&i| slot_of(i).is_some_and(|k| (count[k] as f64) < max_count))
         .collect();
     let (ca, cx) = (p.sparse_along_m, p.sparse_across_m);
     let mut grid: HashMap<(i64, i64), Vec<usize>> = HashMap::new();
