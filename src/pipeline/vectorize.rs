@@ -64,7 +64,9 @@ pub struct Params {
     pub max_bar_width_m: f64,
     /// Gaps (m) up to this long between consecutive solid pieces of a solid lane line are
     /// bridged by an inferred solid piece (confidence halved, no points); 0 turns it off.
-    /// Default 4.
+    /// Default 8: a car or van in the next lane hides 4–8 m of a far line, and worn paint
+    /// fades out over as much; a solid line's designed breaks (junction mouths, the start
+    /// of a dashed stretch) are longer, or change the lane line's class.
     pub bridge_solid_gap_m: f64,
     /// Longer gaps, up to this (m), are bridged too when both solid pieces beside the gap
     /// are at least as long as it: a line painted solid on both sides of a gap shorter than
@@ -107,7 +109,7 @@ impl Default for Params {
             curved_min_sagitta_m: 0.03,
             outline_simplify_m: 0.01,
             max_bar_width_m: 0.8,
-            bridge_solid_gap_m: 4.0,
+            bridge_solid_gap_m: 8.0,
             bridge_long_gap_m: 12.0,
             regularize_dashes: true,
             fill_missing_dashes: 1,
@@ -953,7 +955,7 @@ mod tests {
         let p = Params::default();
         assert_eq!(
             bridge_limit(1.0, 50.0, &p),
-            4.0,
+            8.0,
             "a short piece beside: short gaps only"
         );
         assert_eq!(bridge_limit(9.0, 50.0, &p), 9.0);
@@ -962,7 +964,7 @@ mod tests {
             bridge_long_gap_m: 0.0,
             ..Params::default()
         };
-        assert_eq!(bridge_limit(30.0, 50.0, &off), 4.0);
+        assert_eq!(bridge_limit(30.0, 50.0, &off), 8.0);
         // Far-range pieces (undersampled) are short because the scan rows drift off the
         // line, not because it is broken: long gaps between them are bridged.
         let far = |x0: f64, x1: f64| Piece {
@@ -970,7 +972,7 @@ mod tests {
             ..solid(x0, x1)
         };
         assert_eq!(gap_limit(&far(0.0, 1.0), &far(9.0, 10.0), &p), 12.0);
-        assert_eq!(gap_limit(&far(0.0, 1.0), &solid(9.0, 10.0), &p), 4.0);
+        assert_eq!(gap_limit(&far(0.0, 1.0), &solid(9.0, 10.0), &p), 8.0);
         assert_eq!(gap_limit(&solid(0.0, 30.0), &solid(40.0, 90.0), &p), 12.0);
         let bad = Params {
             bridge_long_gap_m: -1.0,
