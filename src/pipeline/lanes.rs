@@ -33,7 +33,11 @@
 //!    form a dashed stretch, and so do dash-like runs whose centres repeat with one period
 //!    (≥ 75 % of the spacings within ±15 % of the median spacing or twice it; dashes seen
 //!    only in part have irregular lengths but keep the period); everything else is solid
-//!    (occlusion breaks a solid line into irregular runs). With `split_on_class_change`, a
+//!    (occlusion breaks a solid line into irregular runs). A run more than
+//!    `NOT_A_DASH_FACTOR` (4) times the median run of its group is no dash (the first
+//!    metres of the solid line a dashed line turns into); the dashes beside such a run
+//!    need twice `min_dashes`, since a sparse solid line shows the same long run among
+//!    short fragments. With `split_on_class_change`, a
 //!    chain that is solid for ≥ `min_length_m` and dashed elsewhere becomes two lane lines.
 //! 4. **Smooth centreline**: offset(s) by Gaussian local linear regression (bandwidth
 //!    `smoothing_m`) over the pieces' samples; across gaps wider than the bandwidth a cubic
@@ -207,6 +211,9 @@ struct Seg {
 /// direction of a piece L metres long is known to about atan(SLOPE_NOISE_M / L) (3° for a
 /// 1 m far-range fragment, 0.2° for 15 m), which is added to `max_angle_deg`.
 const SLOPE_NOISE_M: f64 = 0.05;
+
+/// A painted run longer than this many times the median run of its group is no dash.
+const NOT_A_DASH_FACTOR: f64 = 4.0;
 
 /// Gaps (m) up to which the direction slack of short pieces applies in full; beyond, it
 /// shrinks in proportion.
@@ -626,7 +633,33 @@ fn regimes(items: &[Item], chain: &[usize], p: &Params) -> Vec<(LaneLineClass, V
             _ => runs.push((a, b, vec![m])),
         }
     }
-    let short: Vec<bool> = runs.iter().map(|r| r.1 - r.0 <= p.dash_max_run_m).collect();
+    let mut short: Vec<bool> = runs.iter().map(|r| r.1 - r.0 <= p.dash_max_run_m).collect();
+    // A run several times longer than the runs around it is no dash even when it is under
+    // `dash_max_run_m`: the first 8 m of the solid line a dashed line turns into before a
+    // junction, next to 2 m dashes. Left in, it would spoil the dash tests of the whole
+    // group; out, the group ends there. A long run is also what a sparse solid line shows
+    // between its short fragments, so a group beside such a run needs twice `min_dashes`.
+    let mut demoted = vec![false; runs.len()];
+    let mut i = 0;
+    while i < runs.len() {
+        if !short[i] {
+            i += 1;
+            continue;
+        }
+        let mut j = i;
+        while j + 1 < runs.len() && short[j + 1] {
+            j += 1;
+        }
+        let mut lens: Vec<f64> = runs[i..=j].iter().map(|r| r.1 - r.0).collect();
+        let med = geom::median(&mut lens);
+        for k in i..=j {
+            if runs[k].1 - runs[k].0 > NOT_A_DASH_FACTOR * med {
+                short[k] = false;
+                demoted[k] = true;
+            }
+        }
+        i = j + 1;
+    }
     // Mark dashed stretches: maximal groups of consecutive short runs that look like dashes.
     let mut dashed = vec![false; runs.len()];
     let mut i = 0;
@@ -675,7 +708,13 @@ fn regimes(items: &[Item], chain: &[usize], p: &Params) -> Vec<(LaneLineClass, V
             spacings.iter().filter(|&&x| on_period(x)).count() as f64 >= 0.75 * spacings.len() as f64
                 && lens.iter().all(|&l| l <= 0.8 * period)
         };
-        if lens.len() >= p.min_dashes && (regular && regular_gaps || regular_period) && paint <= 0.7 {
+        let beside_demoted = (i > 0 && demoted[i - 1]) || (j + 1 < runs.len() && demoted[j + 1]);
+        let min_dashes = if beside_demoted {
+            2 * p.min_dashes
+        } else {
+            p.min_dashes
+        };
+        if lens.len() >= min_dashes && (regular && regular_gaps || regular_period) && paint <= 0.7 {
             dashed[i..=j].iter_mut().for_each(|d| *d = true);
         }
         i = j + 1;
@@ -958,6 +997,72 @@ mod tests {
     /// A 2/4 m dashed line seen in part (each dash read as 1–2 m, so lengths and gaps
     /// vary, one dash missing) keeps its 6 m period and is dashed; a solid line read as
     /// fragments with the same lengths at irregular spacings is solid.
+    /// A worn 2/4 m dashed line (some dashes seen only in part) turns solid before a
+    /// junction; the solid line's first 8 m is seen as one run before a gap. That run is no
+    /// dash: the dashes before it are one dashed lane line and the rest one solid lane
+    /// line. Without the rule the 8 m run spoils the dash tests and all of it is solid.
+    /// A sparse solid line with one long run among five short fragments stays solid.
+    #[test]
+    fn a_long_run_after_dashes_starts_the_solid_line() {
+        let t = test_straight_trajectory(140, -20.0);
+        let p = Params::default();
+        let runs = [
+            (-0.6, 0.2),
+            (4.2, 5.7),
+            (10.2, 12.1),
+            (16.2, 17.4),
+            (22.5, 23.3),
+            (29.4, 30.0),
+            (34.0, 36.0),
+            (40.3, 42.2),
+            (46.5, 47.4),
+            (52.1, 54.1),
+            (58.1, 66.3),
+            (68.3, 69.1),
+            (70.8, 81.9),
+            (82.9, 84.5),
+        ];
+        let pieces: Vec<LanePiece> = runs
+            .iter()
+            .enumerate()
+            .map(|(i, &(a, b))| piece(i, a, b, MarkingClass::DashedLine))
+            .collect();
+        let lanes = grow(&pieces, &t, &p);
+        let mut classes: Vec<(LaneLineClass, f64)> =
+            lanes.lines.iter().map(|l| (l.class, l.length_m)).collect();
+        classes.sort_by(|a, b| a.1.total_cmp(&b.1));
+        assert_eq!(classes.len(), 2, "{classes:?}");
+        assert!(
+            classes
+                .iter()
+                .any(|&(c, l)| c == LaneLineClass::DashedLine && (50.0..60.0).contains(&l)),
+            "{classes:?}"
+        );
+        assert!(
+            classes
+                .iter()
+                .any(|&(c, l)| c == LaneLineClass::SolidLine && (20.0..30.0).contains(&l)),
+            "{classes:?}"
+        );
+        // A far solid line: a 7 m run, then five 1 m fragments on a loose 5-6 m rhythm.
+        let sparse = [
+            (0.0, 6.9),
+            (10.2, 11.0),
+            (15.9, 16.9),
+            (21.5, 22.6),
+            (27.4, 28.2),
+            (32.6, 33.9),
+        ];
+        let pieces: Vec<LanePiece> = sparse
+            .iter()
+            .enumerate()
+            .map(|(i, &(a, b))| piece(i, a, b, MarkingClass::DashedLine))
+            .collect();
+        let lanes = grow(&pieces, &t, &p);
+        assert_eq!(lanes.lines.len(), 1);
+        assert_eq!(lanes.lines[0].class, LaneLineClass::SolidLine);
+    }
+
     #[test]
     fn partly_seen_dashes_are_dashed_by_their_period() {
         let t = traj();
