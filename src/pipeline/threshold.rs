@@ -801,7 +801,13 @@ pub fn rescue_sparse_lines(m: &[f64], o: &[f64], values: &[f32], is_mark: &mut [
         });
     // A dense index over the bright cells' bounding box when it is small (it spans one
     // chunk), so that counting every point needs no hashing.
-    let (w, h) = ((i_hi - i_lo + 1) as usize, (j_hi - j_lo + 1) as usize);
+    // Cells spanned (checked: absurd coordinates saturate the cell indices).
+    let span = |lo: i64, hi: i64| {
+        hi.checked_sub(lo)
+            .and_then(|d| usize::try_from(d).ok())
+            .map_or(usize::MAX, |d| d.saturating_add(1))
+    };
+    let (w, h) = (span(i_lo, i_hi), span(j_lo, j_hi));
     let dense: Option<Vec<u32>> = (w.saturating_mul(h) <= 1 << 24).then(|| {
         let mut d = vec![u32::MAX; w * h];
         for (&(i, j), &k) in &slot {
@@ -852,7 +858,10 @@ pub fn rescue_sparse_lines(m: &[f64], o: &[f64], values: &[f32], is_mark: &mut [
             let mut spread = false;
             for di in -1..=1 {
                 for dj in -1..=1 {
-                    for &k in grid.get(&(gi + di, gj + dj)).map_or(&[][..], |v| v) {
+                    for &k in grid
+                        .get(&(gi.saturating_add(di), gj.saturating_add(dj)))
+                        .map_or(&[][..], |v| v)
+                    {
                         let dm = (m[k] - m[i]).abs();
                         if k != i && dm <= ca && (o[k] - o[i]).abs() <= cx {
                             support += 1;
@@ -1344,6 +1353,14 @@ mod tests {
         };
         let mut none = vec![false; n];
         assert_eq!(rescue_sparse_lines(&m, &o, &v, &mut none, &off), 0);
+        // Absurd coordinates (cell indices saturate) neither panic nor rescue a lone point.
+        let far_m = [1.0e300, -1.0e300, 0.0, f64::NAN];
+        let far_o = [0.0, 1.0e300, -1.0e300, 0.0];
+        let mut marks = vec![false; 4];
+        assert_eq!(
+            rescue_sparse_lines(&far_m, &far_o, &[3.0; 4], &mut marks, &Params::default()),
+            0
+        );
     }
 
     #[test]
