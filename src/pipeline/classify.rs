@@ -28,6 +28,9 @@
 //!    from the piece's slope) and of similar width are merged (mutual best match), so a
 //!    sparse far line or a worn dash is one object. Line pieces read as sparse points
 //!    (under [`SPARSE_LINE_POINTS_PER_M`]) are joined across up to `join_sparse_gap_m`.
+//!    The pieces of one bar across the road (a zebra stripe across a side street, broken
+//!    end to end by far scan rows) are joined the same way across the road
+//!    (`rejoin_across`).
 //! 3. Rules (first match wins):
 //!    - tiny (few points or area) → dropped; compact blobs ≤ `blob_max_size_m` with aspect
 //!      < 1.6 (manhole covers, ~0.6–0.8 m round) → dropped;
@@ -311,6 +314,7 @@ pub fn assess(
         .flat_map_iter(|c| peel_lines(c, &xy, &cloud.intensity, &refl, params))
         .collect();
     let feats = rejoin(feats, &xy, &cloud.intensity, &refl, params);
+    let feats = rejoin_across(feats, &xy, &cloud.intensity, &refl, params);
     let mut out: Vec<(Candidate, Option<DropReason>)> = feats.into_iter().map(|c| rule(c, params)).collect();
     confirm_groups(&mut out);
     out.sort_by(|a, b| {
@@ -803,18 +807,31 @@ fn rejoin(
             }
         }
     }
-    let mut parent: Vec<usize> = (0..n).collect();
-    let mut merged_any = false;
-    for (a, bn) in best_next.iter().enumerate() {
-        if let Some((_, b)) = *bn
-            && best_prev[b].map(|x| x.1) == Some(a)
-        {
-            geom::union(&mut parent, a, b);
-            merged_any = true;
-        }
-    }
-    if !merged_any {
+    let pairs: Vec<(usize, usize)> = best_next
+        .iter()
+        .enumerate()
+        .filter_map(|(a, bn)| bn.map(|(_, b)| (a, b)))
+        .filter(|&(a, b)| best_prev[b].map(|x| x.1) == Some(a))
+        .collect();
+    merge_pairs(feats, &pairs, xy, intensity, refl, p)
+}
+
+/// Merge the candidates linked by `pairs` (transitively) into one each, described anew.
+fn merge_pairs(
+    feats: Vec<Candidate>,
+    pairs: &[(usize, usize)],
+    xy: &[[f64; 2]],
+    intensity: &[f32],
+    refl: &RefLine,
+    p: &Params,
+) -> Vec<Candidate> {
+    if pairs.is_empty() {
         return feats;
+    }
+    let n = feats.len();
+    let mut parent: Vec<usize> = (0..n).collect();
+    for &(a, b) in pairs {
+        geom::union(&mut parent, a, b);
     }
     let mut groups: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
     for i in 0..n {
@@ -842,6 +859,90 @@ fn rejoin(
         .collect();
     out.extend(described);
     out
+}
+
+/// Smallest angle (deg) to the trajectory of a fragment of a bar across the road.
+const ACROSS_MIN_ANGLE_DEG: f64 = 60.0;
+/// Longest fragment (m) re-joined across the road: stripes are 2.5-6 m long.
+const ACROSS_MAX_FRAGMENT_M: f64 = 3.0;
+
+/// Merge the collinear pieces of one bar across the road (mutual best match). At long
+/// range the scan rows run along a zebra stripe across a side street and break it into
+/// 0.5-2 m pieces end to end; one by one they are blobs, noise or nothing, and the
+/// crossing is never recognised. Pieces across the trajectory (≥ [`ACROSS_MIN_ANGLE_DEG`]),
+/// no wider than a crosswalk stripe and at most [`ACROSS_MAX_FRAGMENT_M`] long, whose
+/// centres lie at the same mileage (within half their width + 3 cm) and whose ends are at
+/// most `join_gap_m` apart across the road, of similar width (ratio ≥ 0.6), are one bar.
+/// Side-by-side stripes (about 1 m apart in mileage) and a stop line before the crossing
+/// are never at the same mileage.
+fn rejoin_across(
+    feats: Vec<Candidate>,
+    xy: &[[f64; 2]],
+    intensity: &[f32],
+    refl: &RefLine,
+    p: &Params,
+) -> Vec<Candidate> {
+    if p.join_gap_m <= 0.0 {
+        return feats;
+    }
+    // (mileage, offset from, offset to, width) of the across fragments.
+    let ends: Vec<Option<[f64; 4]>> = feats
+        .iter()
+        .map(|c| {
+            let s = &c.shape;
+            (s.angle_to_trajectory_deg >= ACROSS_MIN_ANGLE_DEG
+                && s.length_m <= ACROSS_MAX_FRAGMENT_M
+                && s.width_m <= p.crosswalk_max_width_m
+                && s.point_count >= 3)
+                .then(|| {
+                    let half = 0.5 * s.length_m * s.angle_to_trajectory_deg.to_radians().sin();
+                    [s.mileage_m, s.offset_m - half, s.offset_m + half, s.width_m]
+                })
+        })
+        .collect();
+    let mut order: Vec<usize> = (0..feats.len()).filter(|&i| ends[i].is_some()).collect();
+    order.sort_by(|&a, &b| {
+        let (ea, eb) = (ends[a].expect("end"), ends[b].expect("end"));
+        ea[0].total_cmp(&eb[0]).then(a.cmp(&b))
+    });
+    let n = feats.len();
+    // Best partner further out across the road, and further in (mutual best pairs chain
+    // the pieces of one bar like beads).
+    let mut best_out: Vec<Option<(f64, usize)>> = vec![None; n];
+    let mut best_in: Vec<Option<(f64, usize)>> = vec![None; n];
+    for (oi, &a) in order.iter().enumerate() {
+        let ea = ends[a].expect("end");
+        for &b in &order[oi + 1..] {
+            let eb = ends[b].expect("end");
+            let tol = 0.5 * ea[3].max(eb[3]) + 0.03;
+            let ds = eb[0] - ea[0];
+            if ds > tol {
+                break;
+            }
+            // Gap between the two offset ranges (negative: they overlap).
+            let gap = (eb[1] - ea[2]).max(ea[1] - eb[2]);
+            if gap < -0.2 || gap > p.join_gap_m || ea[3].min(eb[3]) < 0.6 * ea[3].max(eb[3]) {
+                continue;
+            }
+            let cost = ds.abs() / tol + gap.max(0.0) / p.join_gap_m;
+            let (inner, outer) = if ea[1] + ea[2] <= eb[1] + eb[2] {
+                (a, b)
+            } else {
+                (b, a)
+            };
+            if best_out[inner].is_none_or(|(c, _)| cost < c) {
+                best_out[inner] = Some((cost, outer));
+            }
+            if best_in[outer].is_none_or(|(c, _)| cost < c) {
+                best_in[outer] = Some((cost, inner));
+            }
+        }
+    }
+    let pairs: Vec<(usize, usize)> = (0..n)
+        .filter_map(|a| best_out[a].map(|(_, b)| (a, b)))
+        .filter(|&(a, b)| best_in[b].map(|x| x.1) == Some(a))
+        .collect();
+    merge_pairs(feats, &pairs, xy, intensity, refl, p)
 }
 
 /// Membership of `v` in [lo, hi] with soft shoulders: 1 well inside, falling to 0.5 at the
@@ -1022,6 +1123,55 @@ mod tests {
             }
         }
         v
+    }
+
+    /// A zebra stripe across a side street (0.45 m wide along the trajectory, across it
+    /// from offset 2 to 6 m) read as three pieces end to end, 0.4-0.5 m apart: one bar
+    /// after `rejoin_across`. A second stripe 1 m further along stays its own bar, and the
+    /// pieces of one stripe are never joined to the other's.
+    #[test]
+    fn pieces_of_a_stripe_across_the_road_rejoin_and_stripes_stay_apart() {
+        let (r, p) = (refl(), Params::default());
+        let mut xy = Vec::new();
+        let mut groups: Vec<Vec<usize>> = Vec::new();
+        for x0 in [5.0, 6.0] {
+            for (o0, o1) in [(2.0, 3.3), (3.7, 4.4), (4.9, 6.0)] {
+                let start = xy.len();
+                let mut o = o0;
+                while o <= o1 {
+                    let mut x = x0;
+                    while x <= x0 + 0.45 {
+                        xy.push([x, o]);
+                        x += 0.03;
+                    }
+                    o += 0.03;
+                }
+                groups.push((start..xy.len()).collect());
+            }
+        }
+        let intensity = vec![100.0f32; xy.len()];
+        let feats = |p: &Params| -> Vec<Candidate> {
+            groups
+                .iter()
+                .map(|g| describe(&xy, &intensity, g.clone(), &r, p))
+                .collect()
+        };
+        let out = rejoin_across(feats(&p), &xy, &intensity, &r, &p);
+        assert_eq!(out.len(), 2, "two stripes");
+        for c in &out {
+            assert!(
+                (c.shape.length_m - 4.0).abs() < 0.1,
+                "stripe length {}",
+                c.shape.length_m
+            );
+            assert!(c.shape.angle_to_trajectory_deg > 80.0);
+        }
+        // Gaps wider than `join_gap_m`: six pieces.
+        let off = Params {
+            join_gap_m: 0.3,
+            ..Params::default()
+        };
+        assert_eq!(rejoin_across(feats(&off), &xy, &intensity, &r, &off).len(), 6);
     }
 
     /// Pieces of one line 1.8 m apart: re-joined when they are read as sparse points (a
