@@ -619,6 +619,25 @@ fn merge_overlaps(items: Vec<Item>) -> Vec<Item> {
     out
 }
 
+/// Maximal spans `(first, last)` of consecutive `true` values.
+fn true_spans(v: &[bool]) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < v.len() {
+        if !v[i] {
+            i += 1;
+            continue;
+        }
+        let mut j = i;
+        while j + 1 < v.len() && v[j + 1] {
+            j += 1;
+        }
+        out.push((i, j));
+        i = j + 1;
+    }
+    out
+}
+
 /// Split a chain (pieces in driving order) into solid and dashed stretches.
 fn regimes(items: &[Item], chain: &[usize], p: &Params) -> Vec<(LaneLineClass, Vec<usize>)> {
     // Painted runs: pieces closer than run_join_gap_m.
@@ -640,16 +659,7 @@ fn regimes(items: &[Item], chain: &[usize], p: &Params) -> Vec<(LaneLineClass, V
     // group; out, the group ends there. A long run is also what a sparse solid line shows
     // between its short fragments, so a group beside such a run needs twice `min_dashes`.
     let mut demoted = vec![false; runs.len()];
-    let mut i = 0;
-    while i < runs.len() {
-        if !short[i] {
-            i += 1;
-            continue;
-        }
-        let mut j = i;
-        while j + 1 < runs.len() && short[j + 1] {
-            j += 1;
-        }
+    for (i, j) in true_spans(&short) {
         let mut lens: Vec<f64> = runs[i..=j].iter().map(|r| r.1 - r.0).collect();
         let med = geom::median(&mut lens);
         for k in i..=j {
@@ -658,20 +668,10 @@ fn regimes(items: &[Item], chain: &[usize], p: &Params) -> Vec<(LaneLineClass, V
                 demoted[k] = true;
             }
         }
-        i = j + 1;
     }
     // Mark dashed stretches: maximal groups of consecutive short runs that look like dashes.
     let mut dashed = vec![false; runs.len()];
-    let mut i = 0;
-    while i < runs.len() {
-        if !short[i] {
-            i += 1;
-            continue;
-        }
-        let mut j = i;
-        while j + 1 < runs.len() && short[j + 1] {
-            j += 1;
-        }
+    for (i, j) in true_spans(&short) {
         let lens: Vec<f64> = runs[i..=j].iter().map(|r| r.1 - r.0).collect();
         // Regular dashes: most runs within ±35 % of the median length (dashes cut by an
         // occlusion at its ends do not spoil it; an irregularly broken solid line does).
@@ -717,7 +717,6 @@ fn regimes(items: &[Item], chain: &[usize], p: &Params) -> Vec<(LaneLineClass, V
         if lens.len() >= min_dashes && (regular && regular_gaps || regular_period) && paint <= 0.7 {
             dashed[i..=j].iter_mut().for_each(|d| *d = true);
         }
-        i = j + 1;
     }
     // Regimes of consecutive runs with the same label.
     let mut regs: Vec<(bool, Vec<usize>)> = Vec::new();
