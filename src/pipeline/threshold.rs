@@ -63,6 +63,7 @@
 //! integral images, thresholds and the point passes run in parallel; with hysteresis the
 //! weak mask is built and labelled beside the strong one.
 
+use super::geom::GridIndex;
 use super::rasterize::Raster;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -757,6 +758,8 @@ const SPARSE_CELL_M: f64 = 0.5;
 /// Support points of the sparse-line rescue must spread at least this far along (m), so
 /// that one bright spot (a stud, a stone) does not support itself.
 const SPARSE_MIN_SPREAD_M: f64 = 0.15;
+/// Most density cells of the sparse-line rescue (a 2 km × 2 km box of 0.5 m cells).
+const SPARSE_MAX_CELLS: f64 = (1u64 << 24) as f64;
 
 /// Sparse-line rescue (step 6 of the module docs): at long range a painted line is a row
 /// of isolated points, 0.3–3 m apart, each several times brighter than the asphalt. In the
@@ -770,108 +773,79 @@ const SPARSE_MIN_SPREAD_M: f64 = 0.15;
 /// the background) and is not aligned with the trajectory. `m`, `o` are the points'
 /// mileage and offset; returns how many points were added.
 ///
-/// Hand-written: a hash grid over the few bright sparse points, O(points).
+/// Density counted on a [`Raster`] over the bright points' bounding box (cells at global
+/// multiples, so a point's cell does not depend on the chunk), neighbours found with
+/// [`GridIndex`] in units of (`sparse_along_m`, `sparse_across_m`); O(points).
 pub fn rescue_sparse_lines(m: &[f64], o: &[f64], values: &[f32], is_mark: &mut [bool], p: &Params) -> usize {
-    use std::collections::HashMap;
     if p.sparse_min_value <= 0.0 || m.is_empty() {
         return 0;
     }
-    let cell = |v: f64, size: f64| (v / size).floor() as i64;
-    let is_bright = |i: usize| {
-        values[i].is_finite()
-            && values[i] as f64 >= p.sparse_min_value
-            && m[i].is_finite()
-            && o[i].is_finite()
+    let bright: Vec<usize> = (0..m.len())
+        .into_par_iter()
+        .filter(|&i| {
+            values[i].is_finite()
+                && values[i] as f64 >= p.sparse_min_value
+                && m[i].is_finite()
+                && o[i].is_finite()
+        })
+        .collect();
+    let (bm, bo): (Vec<f64>, Vec<f64>) = bright.iter().map(|&i| (m[i], o[i])).unzip();
+    let extent = |v: &[f64]| {
+        v.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| {
+            (lo.min(x), hi.max(x))
+        })
     };
-    let bright: Vec<usize> = (0..m.len()).into_par_iter().filter(|&i| is_bright(i)).collect();
-    if bright.is_empty() {
+    let ((m_lo, m_hi), (o_lo, o_hi)) = (extent(&bm), extent(&bo));
+    // One chunk's bright points span a few hundred metres; anything wider is no survey.
+    let cells = ((m_hi - m_lo) / SPARSE_CELL_M + 2.0) * ((o_hi - o_lo) / SPARSE_CELL_M + 2.0);
+    if bright.is_empty() || cells.is_nan() || cells > SPARSE_MAX_CELLS {
         return 0;
     }
-    // Pavement points per density cell, counted only in the cells of bright points.
-    let key = |i: usize| (cell(m[i], SPARSE_CELL_M), cell(o[i], SPARSE_CELL_M));
-    let mut slot: HashMap<(i64, i64), usize> = HashMap::new();
-    for &i in &bright {
-        let n = slot.len();
-        slot.entry(key(i)).or_insert(n);
-    }
-    let (i_lo, i_hi, j_lo, j_hi) = slot
-        .keys()
-        .fold((i64::MAX, i64::MIN, i64::MAX, i64::MIN), |a, &(i, j)| {
-            (a.0.min(i), a.1.max(i), a.2.min(j), a.3.max(j))
-        });
-    // A dense index over the bright cells' bounding box when it is small (it spans one
-    // chunk), so that counting every point needs no hashing.
-    // Cells spanned (checked: absurd coordinates saturate the cell indices).
-    let span = |lo: i64, hi: i64| {
-        hi.checked_sub(lo)
-            .and_then(|d| usize::try_from(d).ok())
-            .map_or(usize::MAX, |d| d.saturating_add(1))
-    };
-    let (w, h) = (span(i_lo, i_hi), span(j_lo, j_hi));
-    let dense: Option<Vec<u32>> = (w.saturating_mul(h) <= 1 << 24).then(|| {
-        let mut d = vec![u32::MAX; w * h];
-        for (&(i, j), &k) in &slot {
-            d[(i - i_lo) as usize * h + (j - j_lo) as usize] = k as u32;
-        }
-        d
-    });
-    let slot_of = |i: usize| -> Option<usize> {
-        if !(m[i].is_finite() && o[i].is_finite()) {
-            return None;
-        }
-        let (ci, cj) = key(i);
-        match &dense {
-            Some(d) => {
-                if ci < i_lo || ci > i_hi || cj < j_lo || cj > j_hi {
-                    return None;
-                }
-                let k = d[(ci - i_lo) as usize * h + (cj - j_lo) as usize];
-                (k != u32::MAX).then_some(k as usize)
-            }
-            None => slot.get(&(ci, cj)).copied(),
-        }
-    };
-    let mut count = vec![0u32; slot.len()];
-    for i in 0..m.len() {
-        if let Some(k) = slot_of(i) {
-            count[k] += 1;
+    // Pavement points per density cell (points outside the box are tested in f64 first).
+    let mut density = Raster::covering(&bm, &bo, SPARSE_CELL_M, 0, 0u32);
+    for (&a, &b) in m.iter().zip(o) {
+        if (m_lo..=m_hi).contains(&a)
+            && (o_lo..=o_hi).contains(&b)
+            && let Some((c, r)) = density.cell_of(a, b)
+        {
+            density.data[r * density.width + c] += 1;
         }
     }
     let max_count = p.sparse_max_density * SPARSE_CELL_M * SPARSE_CELL_M;
-    let bright: Vec<usize> = bright
+    let sparse: Vec<usize> = bright
         .into_iter()
-        .filter(|&i| slot_of(i).is_some_and(|k| (count[k] as f64) < max_count))
-        .collect();
-    let (ca, cx) = (p.sparse_along_m, p.sparse_across_m);
-    let mut grid: HashMap<(i64, i64), Vec<usize>> = HashMap::new();
-    for &i in &bright {
-        grid.entry((cell(m[i], ca), cell(o[i], cx))).or_default().push(i);
-    }
-    let need = p.sparse_min_support as usize;
-    let add: Vec<usize> = bright
-        .par_iter()
-        .copied()
-        .filter(|&i| !is_mark[i])
         .filter(|&i| {
-            let (gi, gj) = (cell(m[i], ca), cell(o[i], cx));
+            density
+                .cell_of(m[i], o[i])
+                .is_some_and(|(c, r)| (*density.get(c, r) as f64) < max_count)
+        })
+        .collect();
+    // Neighbours within (sparse_along_m, sparse_across_m): a 3 × 3 block of unit cells in
+    // coordinates scaled by them (relative to the box, so they stay small).
+    let (ca, cx) = (p.sparse_along_m, p.sparse_across_m);
+    let scaled: Vec<[f64; 2]> = sparse
+        .iter()
+        .map(|&i| [(m[i] - m_lo) / ca, (o[i] - o_lo) / cx])
+        .collect();
+    let grid = GridIndex::new(&scaled, 1.0);
+    let need = p.sparse_min_support as usize;
+    let add: Vec<usize> = (0..sparse.len())
+        .into_par_iter()
+        .filter(|&a| !is_mark[sparse[a]])
+        .filter(|&a| {
+            let i = sparse[a];
             let mut support = 0;
             let mut spread = false;
-            for di in -1..=1 {
-                for dj in -1..=1 {
-                    for &k in grid
-                        .get(&(gi.saturating_add(di), gj.saturating_add(dj)))
-                        .map_or(&[][..], |v| v)
-                    {
-                        let dm = (m[k] - m[i]).abs();
-                        if k != i && dm <= ca && (o[k] - o[i]).abs() <= cx {
-                            support += 1;
-                            spread |= dm >= SPARSE_MIN_SPREAD_M;
-                        }
-                    }
+            for k in grid.around(scaled[a], 1).filter(|&b| b != a).map(|b| sparse[b]) {
+                let dm = (m[k] - m[i]).abs();
+                if dm <= ca && (o[k] - o[i]).abs() <= cx {
+                    support += 1;
+                    spread |= dm >= SPARSE_MIN_SPREAD_M;
                 }
             }
             support >= need && spread
         })
+        .map(|a| sparse[a])
         .collect();
     for &i in &add {
         is_mark[i] = true;
@@ -1285,13 +1259,8 @@ mod tests {
     #[test]
     fn sparse_aligned_bright_points_are_paint_and_lone_ones_are_not() {
         let (mut m, mut o, mut v) = (Vec::new(), Vec::new(), Vec::new());
-        let mut rng = 12345u64;
-        let mut rnd = || {
-            rng = rng
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (rng >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut jitter = crate::pipeline::geom::test_jitter(12345);
+        let mut rnd = || jitter() + 0.5;
         // asphalt: 8 points per m² over 40 m x 6 m (offsets 23..29)
         for _ in 0..1920 {
             m.push(40.0 * rnd());
