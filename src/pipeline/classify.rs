@@ -760,18 +760,15 @@ fn rejoin(
             })
         })
         .collect();
-    let max_gap = |a: usize, b: usize| {
-        if sparse[a] && sparse[b] {
-            p.join_gap_m.max(p.join_sparse_gap_m)
-        } else {
-            p.join_gap_m
-        }
-    };
     let window = p.join_gap_m.max(p.join_sparse_gap_m);
     let cost = |a: usize, b: usize| -> Option<f64> {
         let (ea, eb) = (ends[a].as_ref()?, ends[b].as_ref()?);
         let gap = eb.s0 - ea.s1;
-        let limit = max_gap(a, b);
+        let limit = if sparse[a] && sparse[b] {
+            window
+        } else {
+            p.join_gap_m
+        };
         if gap < -0.2 || gap > limit {
             return None;
         }
@@ -787,9 +784,7 @@ fn rejoin(
         Some(dev / tol + gap.max(0.0) / limit)
     };
     // Candidate successors are the next pieces in mileage order (window bounded by the gap).
-    let n = feats.len();
-    let mut best_next: Vec<Option<(f64, usize)>> = vec![None; n];
-    let mut best_prev: Vec<Option<(f64, usize)>> = vec![None; n];
+    let mut links = Vec::new();
     for (oi, &a) in order.iter().enumerate() {
         let ea = ends[a].as_ref().expect("end");
         for &b in &order[oi + 1..] {
@@ -798,22 +793,31 @@ fn rejoin(
                 break;
             }
             if let Some(c) = cost(a, b) {
-                if best_next[a].is_none_or(|(bc, _)| c < bc) {
-                    best_next[a] = Some((c, b));
-                }
-                if best_prev[b].is_none_or(|(bc, _)| c < bc) {
-                    best_prev[b] = Some((c, a));
-                }
+                links.push((a, b, c));
             }
         }
     }
-    let pairs: Vec<(usize, usize)> = best_next
-        .iter()
-        .enumerate()
-        .filter_map(|(a, bn)| bn.map(|(_, b)| (a, b)))
-        .filter(|&(a, b)| best_prev[b].map(|x| x.1) == Some(a))
-        .collect();
+    let pairs = mutual_best(feats.len(), &links);
     merge_pairs(feats, &pairs, xy, intensity, refl, p)
+}
+
+/// The links `(a, b, cost)` (a before b) that are both a's cheapest link to a successor
+/// and b's cheapest link to a predecessor (the first listed wins a tie).
+fn mutual_best(n: usize, links: &[(usize, usize, f64)]) -> Vec<(usize, usize)> {
+    let mut best_next: Vec<Option<(f64, usize)>> = vec![None; n];
+    let mut best_prev: Vec<Option<(f64, usize)>> = vec![None; n];
+    for &(a, b, c) in links {
+        if best_next[a].is_none_or(|(bc, _)| c < bc) {
+            best_next[a] = Some((c, b));
+        }
+        if best_prev[b].is_none_or(|(bc, _)| c < bc) {
+            best_prev[b] = Some((c, a));
+        }
+    }
+    (0..n)
+        .filter_map(|a| best_next[a].map(|(_, b)| (a, b)))
+        .filter(|&(a, b)| best_prev[b].map(|x| x.1) == Some(a))
+        .collect()
 }
 
 /// Merge the candidates linked by `pairs` (transitively) into one each, described anew.
@@ -905,11 +909,9 @@ fn rejoin_across(
         let (ea, eb) = (ends[a].expect("end"), ends[b].expect("end"));
         ea[0].total_cmp(&eb[0]).then(a.cmp(&b))
     });
-    let n = feats.len();
-    // Best partner further out across the road, and further in (mutual best pairs chain
-    // the pieces of one bar like beads).
-    let mut best_out: Vec<Option<(f64, usize)>> = vec![None; n];
-    let mut best_in: Vec<Option<(f64, usize)>> = vec![None; n];
+    // Links from the inner piece to the outer one across the road: mutual best links
+    // chain the pieces of one bar like beads.
+    let mut links = Vec::new();
     for (oi, &a) in order.iter().enumerate() {
         let ea = ends[a].expect("end");
         for &b in &order[oi + 1..] {
@@ -930,18 +932,10 @@ fn rejoin_across(
             } else {
                 (b, a)
             };
-            if best_out[inner].is_none_or(|(c, _)| cost < c) {
-                best_out[inner] = Some((cost, outer));
-            }
-            if best_in[outer].is_none_or(|(c, _)| cost < c) {
-                best_in[outer] = Some((cost, inner));
-            }
+            links.push((inner, outer, cost));
         }
     }
-    let pairs: Vec<(usize, usize)> = (0..n)
-        .filter_map(|a| best_out[a].map(|(_, b)| (a, b)))
-        .filter(|&(a, b)| best_in[b].map(|x| x.1) == Some(a))
-        .collect();
+    let pairs = mutual_best(feats.len(), &links);
     merge_pairs(feats, &pairs, xy, intensity, refl, p)
 }
 

@@ -843,6 +843,15 @@ mod tests {
         test_straight_trajectory(100, -20.0)
     }
 
+    /// Dash-class pieces on the spans `(x0, x1)`, keyed by position.
+    fn dash_pieces(spans: &[(f64, f64)]) -> Vec<LanePiece> {
+        spans
+            .iter()
+            .enumerate()
+            .map(|(i, &(a, b))| piece(i, a, b, MarkingClass::DashedLine))
+            .collect()
+    }
+
     fn piece(key: usize, x0: f64, x1: f64, class: MarkingClass) -> LanePiece {
         LanePiece {
             key,
@@ -1021,12 +1030,7 @@ mod tests {
             (70.8, 81.9),
             (82.9, 84.5),
         ];
-        let pieces: Vec<LanePiece> = runs
-            .iter()
-            .enumerate()
-            .map(|(i, &(a, b))| piece(i, a, b, MarkingClass::DashedLine))
-            .collect();
-        let lanes = grow(&pieces, &t, &p);
+        let lanes = grow(&dash_pieces(&runs), &t, &p);
         let mut classes: Vec<(LaneLineClass, f64)> =
             lanes.lines.iter().map(|l| (l.class, l.length_m)).collect();
         classes.sort_by(|a, b| a.1.total_cmp(&b.1));
@@ -1052,12 +1056,7 @@ mod tests {
             (27.4, 28.2),
             (32.6, 33.9),
         ];
-        let pieces: Vec<LanePiece> = sparse
-            .iter()
-            .enumerate()
-            .map(|(i, &(a, b))| piece(i, a, b, MarkingClass::DashedLine))
-            .collect();
-        let lanes = grow(&pieces, &t, &p);
+        let lanes = grow(&dash_pieces(&sparse), &t, &p);
         assert_eq!(lanes.lines.len(), 1);
         assert_eq!(lanes.lines[0].class, LaneLineClass::SolidLine);
     }
