@@ -20,8 +20,10 @@
 //! from north. Lane lines: see `lanes` (improved line-segment self-growth of Yao 2021).
 //!
 //! `assemble`, in order: crosswalk stripes put on their crossing's design (`crosswalks`:
-//! common width and edges, worn fragments absorbed, missing stripes filled); stop lines
-//! joined with the marks on their centre line (`stoplines`); lane-line growth with
+//! common width and edges, worn fragments absorbed, missing stripes filled); "stop lines"
+//! along the road at the offset of a line piece they continue made line pieces (a far
+//! line's sparse pieces read as bars); stop lines joined with the marks on their centre
+//! line (`stoplines`); lane-line growth with
 //! crosswalks and stop lines as barriers; line pieces whose width the points do not
 //! resolve widened to their lane line's width; gaps of solid lane lines bridged (short
 //! ones always, long ones between longer pieces); dashes put on their line's design
@@ -734,6 +736,100 @@ fn join_stop_lines(mut pieces: Vec<Piece>, refl: &RefLine) -> Vec<Piece> {
     without(pieces, removed)
 }
 
+/// Largest offset difference (m) between a bar along the road and the line piece it
+/// continues, and the largest gap (m) between them, for [`lines_not_stop_lines`].
+const ALONG_BAR_OFFSET_M: f64 = 0.2;
+const ALONG_BAR_GAP_M: f64 = 15.0;
+
+/// A "stop line" that runs along the road (within about 20° of it) and continues a line
+/// piece at its offset (≤ [`ALONG_BAR_OFFSET_M`] across, ≤ [`ALONG_BAR_GAP_M`] along, either
+/// side) is a piece of that lane line: at long range a sparse solid line's 4–6 m pieces read
+/// as 0.3 m bars, which is what a side street's stop line looks like from the main road.
+/// A real stop line across a side street is set back from the main road's edge line, so it
+/// is not at that line's offset. Such bars become solid pieces with their axis as
+/// centreline, so lane-line growth links across them instead of stopping at a barrier.
+fn lines_not_stop_lines(pieces: &mut [Piece], refl: &RefLine) {
+    // (s, o) samples of the line pieces, sorted by s.
+    let lines: Vec<(usize, Vec<[f64; 2]>)> = pieces
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| {
+            matches!(
+                p.marking.class,
+                MarkingClass::SolidLine | MarkingClass::DashedLine
+            )
+        })
+        .filter_map(|(k, p)| {
+            let mut so: Vec<[f64; 2]> = p.centerline.as_ref()?.iter().map(|&v| refl.locate(v)).collect();
+            so.sort_by(|a, b| a[0].total_cmp(&b[0]));
+            (so.len() >= 2).then_some((k, so))
+        })
+        .collect();
+    // Mean offset of the samples within 3 m of one end.
+    let end_offset = |so: &[[f64; 2]], at_end: bool| {
+        let (lo, hi) = if at_end {
+            (so[so.len() - 1][0] - 3.0, f64::INFINITY)
+        } else {
+            (f64::NEG_INFINITY, so[0][0] + 3.0)
+        };
+        let v: Vec<f64> = so
+            .iter()
+            .filter(|q| q[0] >= lo && q[0] <= hi)
+            .map(|q| q[1])
+            .collect();
+        v.iter().sum::<f64>() / v.len().max(1) as f64
+    };
+    let mut turned = Vec::new();
+    for (k, p) in pieces.iter().enumerate() {
+        if p.marking.class != MarkingClass::StopLine || p.marking.outline.len() < 4 {
+            continue;
+        }
+        let so: Vec<[f64; 2]> = p.marking.outline.iter().map(|&v| refl.locate(v)).collect();
+        let (s0, s1) = so.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, q| {
+            (a.0.min(q[0]), a.1.max(q[0]))
+        });
+        let (o0, o1) = so.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, q| {
+            (a.0.min(q[1]), a.1.max(q[1]))
+        });
+        // Along the road: its extent along is ≥ 3× its extent across (≲ 20°).
+        if s1 - s0 < 3.0 * (o1 - o0) {
+            continue;
+        }
+        let o = 0.5 * (o0 + o1);
+        let continues = lines.iter().any(|(_, l)| {
+            let (ls0, ls1) = (l[0][0], l[l.len() - 1][0]);
+            let before = (-0.5..=ALONG_BAR_GAP_M).contains(&(s0 - ls1))
+                && (end_offset(l, true) - o).abs() <= ALONG_BAR_OFFSET_M;
+            let after = (-0.5..=ALONG_BAR_GAP_M).contains(&(ls0 - s1))
+                && (end_offset(l, false) - o).abs() <= ALONG_BAR_OFFSET_M;
+            before || after
+        });
+        if continues {
+            turned.push(k);
+        }
+    }
+    for k in turned {
+        let p = &mut pieces[k];
+        let r = &p.marking.outline;
+        // Axis: the midpoints of the rectangle's two short sides, in driving order.
+        let mid = |a: [f64; 2], b: [f64; 2]| [0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1])];
+        let d = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).hypot(a[1] - b[1]);
+        let (e0, e1) = if d(r[0], r[1]) < d(r[1], r[2]) {
+            (mid(r[0], r[1]), mid(r[2], r[3]))
+        } else {
+            (mid(r[1], r[2]), mid(r[3], r[0]))
+        };
+        let axis = if refl.locate(e0)[0] <= refl.locate(e1)[0] {
+            vec![e0, e1]
+        } else {
+            vec![e1, e0]
+        };
+        p.marking.class = MarkingClass::SolidLine;
+        p.marking.heading_deg = heading_deg([axis[1][0] - axis[0][0], axis[1][1] - axis[0][1]]);
+        p.centerline = Some(axis);
+    }
+}
+
 /// Smallest outline area kept (m²): far below any real marking (a 0.1 m x 0.01 m sliver).
 const MIN_OUTLINE_AREA_M2: f64 = 1e-3;
 
@@ -745,6 +841,8 @@ pub fn assemble(pieces: Vec<Piece>, traj_abs: &Trajectory, params: &Params) -> (
     } else {
         pieces
     };
+    let mut pieces = pieces;
+    lines_not_stop_lines(&mut pieces, &refl);
     let pieces = if params.join_stop_lines {
         join_stop_lines(pieces, &refl)
     } else {
@@ -979,5 +1077,52 @@ mod tests {
             ..Params::default()
         };
         assert!(bad.validate().unwrap_err().contains("bridge_long_gap_m"));
+    }
+
+    /// A far solid line's 5 m piece read as a "stop line" along the road continues the line
+    /// and becomes a solid piece; a side street's stop line set back 1 m from the line, and
+    /// a stop line across the road, stay.
+    #[test]
+    fn bars_along_the_road_that_continue_a_line_are_line_pieces() {
+        let traj = crate::pipeline::types::test_straight_trajectory(100, -20.0);
+        let refl = RefLine::new(&traj);
+        let bar = |x0: f64, x1: f64, y0: f64, y1: f64| Piece {
+            marking: Marking {
+                class: MarkingClass::StopLine,
+                outline: vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]],
+                ..solid(0.0, 1.0).marking
+            },
+            centerline: None,
+            undersampled: None,
+        };
+        let at = |mut p: Piece, y: f64| {
+            p.marking.outline.iter_mut().for_each(|q| q[1] += y);
+            p.centerline.iter_mut().flatten().for_each(|q| q[1] += y);
+            p
+        };
+        let mut pieces = vec![
+            at(solid(0.0, 10.0), 26.5),
+            bar(14.0, 19.0, 26.35, 26.65),
+            bar(14.0, 19.0, 27.35, 27.65),
+            bar(22.0, 22.3, 20.0, 26.0),
+        ];
+        lines_not_stop_lines(&mut pieces, &refl);
+        let classes: Vec<MarkingClass> = pieces.iter().map(|p| p.marking.class).collect();
+        assert_eq!(
+            classes,
+            [
+                MarkingClass::SolidLine,
+                MarkingClass::SolidLine,
+                MarkingClass::StopLine,
+                MarkingClass::StopLine
+            ]
+        );
+        let cl = pieces[1]
+            .centerline
+            .as_ref()
+            .expect("a line piece has a centreline");
+        let near = |p: [f64; 2], q: [f64; 2]| (p[0] - q[0]).hypot(p[1] - q[1]) < 1e-9;
+        assert!(near(cl[0], [14.0, 26.5]) && near(cl[1], [19.0, 26.5]), "{cl:?}");
+        assert!((pieces[1].marking.heading_deg - 90.0).abs() < 1e-9);
     }
 }
