@@ -32,7 +32,8 @@ use super::error::PipelineError;
 use super::params::ValidParams;
 use super::types::{Crs, Extraction, PointCloud, StationIndex, Trajectory};
 use super::{
-    Inputs, Progress, classify, cluster, io, pavement, pavement_verge, rasterize, threshold, vectorize,
+    Inputs, Progress, classify, cluster, io, observed, pavement, pavement_verge, rasterize, threshold,
+    vectorize,
 };
 use rayon::prelude::*;
 use std::time::Instant;
@@ -104,6 +105,8 @@ struct ChunkMarks {
     pavement_points: u64,
     /// Seconds of the pavement, rasterize and threshold stages (in [`STAGES`] order).
     stage_seconds: [f64; 7],
+    /// Dark pavement points of the core by cell (see [`observed`]).
+    dark: observed::DarkRows,
 }
 
 impl ChunkMarks {
@@ -114,6 +117,7 @@ impl ChunkMarks {
             points_processed: 0,
             pavement_points: 0,
             stage_seconds: [0.0; 7],
+            dark: observed::DarkRows::default(),
         }
     }
 }
@@ -215,6 +219,7 @@ fn run_ctx(ctx: &mut Ctx<'_>, inputs: &Inputs) -> Result<Extraction, PipelineErr
     // the core the others leave idle. Results are merged in chunk order, so nothing
     // depends on the overlap.
     let mut streaming = Streaming::default();
+    let mut seen = observed::Observed::new(traj.clone(), origin, max_off);
     let mut pieces: Vec<vectorize::Piece> = Vec::new();
     let n_chunks = plan.count();
     ctx.stats.chunks = n_chunks;
@@ -261,6 +266,7 @@ fn run_ctx(ctx: &mut Ctx<'_>, inputs: &Inputs) -> Result<Extraction, PipelineErr
                     let ci = lo + j;
                     let base = base_of(ci);
                     ctx.stats.merge_chunk(&cm);
+                    seen.add(&cm.dark);
                     ctx.progress.report("cluster", base + 0.8 * step);
                     let t0 = Instant::now();
                     let last = ci + 1 == n_chunks;
@@ -297,7 +303,8 @@ fn run_ctx(ctx: &mut Ctx<'_>, inputs: &Inputs) -> Result<Extraction, PipelineErr
     // Lane lines over the whole drive, class corrections, stable ids in driving order.
     ctx.progress.report("vectorize", READ_SHARE + CHUNK_SHARE);
     let t0 = Instant::now();
-    let (markings, lane_lines) = vectorize::assemble(pieces, &traj_abs, &params.vectorize);
+    let (markings, lane_lines) =
+        vectorize::assemble(pieces, &traj_abs, &params.vectorize, Some(&seen.lookup()));
     ctx.stats.add(6, t0);
     ctx.progress.report("vectorize", 1.0);
     ctx.stats.total_seconds = t_start.elapsed().as_secs_f64();
@@ -536,6 +543,7 @@ fn marking_points(
                 },
                 &p.rasterize,
             );
+            out.dark = observed::dark_rows(&px, py, &values, (core_lo, core_hi), p.pavement.max_offset_m);
             let raster = rasterize::idw(&px, py, &values, &p.rasterize);
             add(&mut out, 2, t0);
             check()?;

@@ -26,14 +26,21 @@
 //!    dashes and solid pieces join). Links are made between mutual best
 //!    matches (cost = offset mismatch / tolerance + gap / 2·max_gap), so the result does not
 //!    depend on a seed cluster and growth runs in both directions at once. Two rounds: the
-//!    second links whole chains, with slopes estimated over their last 15 m.
+//!    second links whole chains, with slopes estimated over their last 15 m. Where the
+//!    caller knows what the scanner saw (`super::observed`) and it saw no bare asphalt on
+//!    a gap's course, the gap may be up to `max_unseen_gap_m`, the offsets may match
+//!    without extrapolating the slopes, and short pieces' directions count with their
+//!    full uncertainty: a far line crossed by drifting scan columns, or hidden by traffic.
 //! 3. **Dashed or solid**: pieces closer than `run_join_gap_m` form painted runs; runs up
 //!    to `dash_max_run_m` are dash-like. At least `min_dashes` consecutive dash-like runs
 //!    of regular length (≥ 60 % within ±35 % of the median) with paint ≤ 80 % of their span
 //!    form a dashed stretch, and so do dash-like runs whose centres repeat with one period
 //!    (≥ 75 % of the spacings within ±15 % of the median spacing or twice it; dashes seen
 //!    only in part have irregular lengths but keep the period); everything else is solid
-//!    (occlusion breaks a solid line into irregular runs). A run more than
+//!    (occlusion breaks a solid line into irregular runs). Where the scanner's view is
+//!    known, a dashed stretch also needs a third of its gaps (at least one) seen bare: the
+//!    fragments of a far solid line can have the lengths and spacing of dashes, but their
+//!    gaps never show asphalt on the line's course. A run more than
 //!    `NOT_A_DASH_FACTOR` (4) times the median run of its group is no dash (the first
 //!    metres of the solid line a dashed line turns into); the dashes beside such a run
 //!    need twice `min_dashes`, since a sparse solid line shows the same long run among
@@ -59,6 +66,7 @@
 //! O(p log p + p·k) for p pieces with k candidates within the gap window; O(v) output.
 
 use super::geom;
+use super::observed::{Gap, Lookup};
 use super::refline::RefLine;
 use super::types::{LaneLineClass, MarkingClass, Trajectory};
 use serde::{Deserialize, Serialize};
@@ -71,6 +79,10 @@ pub struct Params {
     /// (Yao: 20 m centre to centre; 40 m end to end covers a GB 6/9 m line missing two
     /// dashes, or 20 m of occlusion anywhere in it).
     pub max_gap_m: f64,
+    /// Largest gap bridged when the scanner did not see the gap's course (m; see
+    /// [`super::observed`]): a far line crossed by too few scan rows, a long occlusion.
+    /// Default 60.
+    pub max_unseen_gap_m: f64,
     /// Offset mismatch allowed at a gap (m), plus `lateral_tolerance_per_m` per metre of
     /// gap. Defaults 0.25 and 0.01: lane lines 3–3.75 m apart are never joined.
     pub lateral_tolerance_m: f64,
@@ -106,6 +118,7 @@ impl Default for Params {
     fn default() -> Self {
         Self {
             max_gap_m: 40.0,
+            max_unseen_gap_m: 60.0,
             lateral_tolerance_m: 0.25,
             lateral_tolerance_per_m: 0.01,
             max_angle_deg: 5.0,
@@ -127,6 +140,7 @@ impl Params {
     pub fn validate(&self) -> Result<(), String> {
         let checks = [
             ("max_gap_m", self.max_gap_m, 0.0, 500.0),
+            ("max_unseen_gap_m", self.max_unseen_gap_m, 0.0, 500.0),
             ("lateral_tolerance_m", self.lateral_tolerance_m, 0.0, 5.0),
             ("lateral_tolerance_per_m", self.lateral_tolerance_per_m, 0.0, 1.0),
             ("max_angle_deg", self.max_angle_deg, 0.0, 45.0),
@@ -212,6 +226,11 @@ struct Seg {
 /// 1 m far-range fragment, 0.2° for 15 m), which is added to `max_angle_deg`.
 const SLOPE_NOISE_M: f64 = 0.05;
 
+/// Half width (m) of the course whose cells tell whether a gap was seen (see
+/// [`super::observed`]): the middle of a 0.15 m line, allowing a few centimetres of
+/// error in the course.
+const COURSE_HALF_WIDTH_M: f64 = 0.05;
+
 /// A painted run longer than this many times the median run of its group is no dash.
 const NOT_A_DASH_FACTOR: f64 = 4.0;
 
@@ -277,7 +296,12 @@ fn seg_of(items: &[Item], members: Vec<usize>) -> Seg {
 }
 
 /// Mutual-best linking of segments; returns chains of segment indices in driving order.
-fn link(segs: &[Seg], p: &Params, barriers: &[[f64; 4]]) -> Vec<Vec<usize>> {
+fn link(
+    segs: &[Seg],
+    p: &Params,
+    barriers: &[[f64; 4]],
+    unseen: &dyn Fn([f64; 2], [f64; 2]) -> bool,
+) -> Vec<Vec<usize>> {
     let n = segs.len();
     let mut order: Vec<usize> = (0..n).collect();
     order.sort_by(|&a, &b| segs[a].s0.total_cmp(&segs[b].s0).then(a.cmp(&b)));
@@ -291,7 +315,7 @@ fn link(segs: &[Seg], p: &Params, barriers: &[[f64; 4]]) -> Vec<Vec<usize>> {
         let from = order.partition_point(|&x| segs[x].s0 < sa.s1 - 0.5).max(oi + 1);
         for &b in &order[from..] {
             let sb = &segs[b];
-            if sb.s0 > sa.s1 + p.max_gap_m {
+            if sb.s0 > sa.s1 + p.max_gap_m.max(p.max_unseen_gap_m) {
                 break;
             }
             if b == a || sb.s1 <= sa.s1 {
@@ -300,17 +324,28 @@ fn link(segs: &[Seg], p: &Params, barriers: &[[f64; 4]]) -> Vec<Vec<usize>> {
             let g = (sb.s0 - sa.s1).max(0.0);
             let pa = sa.o1 + sa.slope1 * g / 2.0;
             let pb = sb.o0 - sb.slope0 * g / 2.0;
-            let dev = (pa - pb).abs();
+            let mut dev = (pa - pb).abs();
             let tol = p.lateral_tolerance_m + p.lateral_tolerance_per_m * g;
-            if dev > tol {
-                continue;
-            }
             // ... but only across short gaps: two short pieces far apart are weak evidence
             // of one line whatever their directions.
             let slack = ((SLOPE_NOISE_M / sa.span()).atan() + (SLOPE_NOISE_M / sb.span()).atan())
                 * (SLACK_GAP_M / g.max(1e-6)).min(1.0);
-            if (sa.slope1.atan() - sb.slope0.atan()).abs() > max_tan + slack {
-                continue;
+            let turn = (sa.slope1.atan() - sb.slope0.atan()).abs();
+            if dev > tol || turn > max_tan + slack || g > p.max_gap_m {
+                // Across a gap the scanner did not see, the pieces on either side are all
+                // the evidence there is of the line: a short fragment's own slope (a 1 m
+                // far-range piece's is off by several degrees) is not extrapolated, and its
+                // direction counts with its full uncertainty however long the gap.
+                let full_slack = (SLOPE_NOISE_M / sa.span()).atan() + (SLOPE_NOISE_M / sb.span()).atan();
+                let flat = (sa.o1 - sb.o0).abs();
+                if g > p.max_unseen_gap_m
+                    || dev.min(flat) > tol
+                    || turn > max_tan + full_slack
+                    || !unseen([sa.s1, sa.o1], [sb.s0, sb.o0])
+                {
+                    continue;
+                }
+                dev = dev.min(flat);
             }
             // Widths compared with 5 cm added: sparse far-range pieces under-read their
             // width by about a point spacing, which must not break a line.
@@ -363,7 +398,7 @@ fn link(segs: &[Seg], p: &Params, barriers: &[[f64; 4]]) -> Vec<Vec<usize>> {
 
 /// Grow lane lines from pieces. See the module docs.
 pub fn grow(pieces: &[LanePiece], traj: &Trajectory, p: &Params) -> Lanes {
-    grow_with_barriers(pieces, traj, p, &[])
+    grow_with_barriers(pieces, traj, p, &[], None)
 }
 
 /// [`grow`], never bridging a gap across a barrier: markings that cross the road (stop
@@ -375,8 +410,25 @@ pub fn grow_with_barriers(
     traj: &Trajectory,
     p: &Params,
     barriers: &[Vec<[f64; 2]>],
+    seen: Option<&Lookup<'_>>,
 ) -> Lanes {
     let refl = RefLine::new(traj);
+    // What the scanner saw on the course of a gap from (s, o) `a` to `b`.
+    let gap_at = |a: [f64; 2], b: [f64; 2]| {
+        let Some(seen) = seen else { return Gap::Unknown };
+        if b[0] - a[0] < 0.5 {
+            return Gap::Unknown;
+        }
+        let n = (b[0] - a[0]).ceil() as usize;
+        let course: Vec<[f64; 2]> = (0..=n)
+            .map(|k| {
+                let t = k as f64 / n as f64;
+                refl.point(a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1]))
+            })
+            .collect();
+        seen.gap(&course, COURSE_HALF_WIDTH_M)
+    };
+    let unseen = |a: [f64; 2], b: [f64; 2]| gap_at(a, b) == Gap::Unseen;
     // Barrier boxes in the trajectory frame (s0, s1, o0, o1), widened by 0.5 m across so
     // the gaps between zebra stripes count too.
     let boxes: Vec<[f64; 4]> = barriers
@@ -414,12 +466,12 @@ pub fn grow_with_barriers(
     let items = merge_overlaps(items);
     // Round 1: pieces; round 2: chains.
     let segs: Vec<Seg> = (0..items.len()).map(|i| seg_of(&items, vec![i])).collect();
-    let chains1: Vec<Vec<usize>> = link(&segs, p, &boxes)
+    let chains1: Vec<Vec<usize>> = link(&segs, p, &boxes, &unseen)
         .into_iter()
         .map(|c| c.into_iter().flat_map(|s| segs[s].members.clone()).collect())
         .collect();
     let segs2: Vec<Seg> = chains1.into_iter().map(|m| seg_of(&items, m)).collect();
-    let chains: Vec<Vec<usize>> = link(&segs2, p, &boxes)
+    let chains: Vec<Vec<usize>> = link(&segs2, p, &boxes, &unseen)
         .into_iter()
         .map(|c| c.into_iter().flat_map(|s| segs2[s].members.clone()).collect())
         .collect();
@@ -427,7 +479,7 @@ pub fn grow_with_barriers(
     let mut out = Lanes::default();
     for mut chain in chains {
         chain.sort_by(|&a, &b| items[a].so[0][0].total_cmp(&items[b].so[0][0]).then(a.cmp(&b)));
-        for (class, members) in regimes(&items, &chain, p) {
+        for (class, members) in regimes(&items, &chain, p, seen.map(|_| &gap_at as &dyn Fn(_, _) -> Gap)) {
             let s0 = items[members[0]].so[0][0];
             let s1 = members
                 .iter()
@@ -639,7 +691,12 @@ fn true_spans(v: &[bool]) -> Vec<(usize, usize)> {
 }
 
 /// Split a chain (pieces in driving order) into solid and dashed stretches.
-fn regimes(items: &[Item], chain: &[usize], p: &Params) -> Vec<(LaneLineClass, Vec<usize>)> {
+fn regimes(
+    items: &[Item],
+    chain: &[usize],
+    p: &Params,
+    gap_at: Option<&dyn Fn([f64; 2], [f64; 2]) -> Gap>,
+) -> Vec<(LaneLineClass, Vec<usize>)> {
     // Painted runs: pieces closer than run_join_gap_m.
     let mut runs: Vec<(f64, f64, Vec<usize>)> = Vec::new();
     for &m in chain {
@@ -714,7 +771,29 @@ fn regimes(items: &[Item], chain: &[usize], p: &Params) -> Vec<(LaneLineClass, V
         } else {
             p.min_dashes
         };
-        if lens.len() >= min_dashes && (regular && regular_gaps || regular_period) && paint <= 0.7 {
+        // Where the scanner's view is known, some dash gaps must have been seen bare: at
+        // long range the scan columns drift on and off a line, and a solid line's
+        // fragments have the lengths and spacing of dashes, but its gaps never show
+        // asphalt on its course (their points, where there are any, are paint).
+        let bare_count = || {
+            let gap_at = gap_at?;
+            let end = |k: usize| {
+                let last = &items[runs[k].2[runs[k].2.len() - 1]].so;
+                last[last.len() - 1]
+            };
+            let bare = (i..j)
+                .filter(|&k| gap_at(end(k), items[runs[k + 1].2[0]].so[0]) == Gap::SeenBare)
+                .count();
+            Some(bare)
+        };
+        // At least a third of them seen bare, or the group is no dashed stretch. (Bare
+        // gaps alone do not make dashes: worn solid lines have them too.)
+        let bare_some = || bare_count().is_none_or(|b| b >= 1 && 3 * b >= j - i);
+        if lens.len() >= min_dashes
+            && (regular && regular_gaps || regular_period)
+            && paint <= 0.7
+            && bare_some()
+        {
             dashed[i..=j].iter_mut().for_each(|d| *d = true);
         }
     }
@@ -837,6 +916,7 @@ fn centreline(items: &[Item], members: &[usize], refl: &RefLine, p: &Params) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::pipeline::observed::test_seen_except;
     use crate::pipeline::types::test_straight_trajectory;
 
     fn traj() -> Trajectory {
@@ -1094,5 +1174,60 @@ mod tests {
         let lanes = grow(&fragments, &t, &p);
         assert_eq!(lanes.lines.len(), 1);
         assert_eq!(lanes.lines[0].class, LaneLineClass::SolidLine);
+    }
+
+    /// Two solid pieces 45 m apart (more than `max_gap_m`): one lane line when the scanner
+    /// did not see the gap's course (no dark point on it), two when it saw bare asphalt.
+    #[test]
+    fn lines_link_across_long_gaps_the_scanner_did_not_see() {
+        let t = traj();
+        let p = Params::default();
+        let pieces = [
+            piece(0, 0.0, 15.0, MarkingClass::SolidLine),
+            piece(1, 60.0, 78.0, MarkingClass::SolidLine),
+        ];
+        let unseen = test_seen_except(&t, 3.5, |x| (15.0..60.0).contains(&x));
+        let lanes = grow_with_barriers(&pieces, &t, &p, &[], Some(&unseen.lookup()));
+        assert_eq!(lanes.lines.len(), 1);
+        assert_eq!(lanes.lines[0].pieces, [0, 1]);
+        let bare = test_seen_except(&t, 3.5, |_| false);
+        let lanes = grow_with_barriers(&pieces, &t, &p, &[], Some(&bare.lookup()));
+        assert_eq!(lanes.lines.len(), 2);
+        // Beyond `max_unseen_gap_m`: two lines whatever was seen.
+        let short = Params {
+            max_unseen_gap_m: 30.0,
+            ..Params::default()
+        };
+        assert_eq!(
+            grow_with_barriers(&pieces, &t, &short, &[], Some(&unseen.lookup()))
+                .lines
+                .len(),
+            2
+        );
+    }
+
+    /// 1.5 m fragments every 6 m (a far line's scan columns drifting on and off it): a
+    /// dashed line when its gaps show bare asphalt, a solid line when their course holds
+    /// no dark point (the points there are paint), and dashed without any record.
+    #[test]
+    fn fragments_without_bare_gaps_are_no_dashes() {
+        let t = traj();
+        let p = Params::default();
+        let spans: Vec<(f64, f64)> = (0..12).map(|i| (6.0 * i as f64, 6.0 * i as f64 + 1.5)).collect();
+        let pieces = dash_pieces(&spans);
+        let class = |seen: Option<&crate::pipeline::observed::Observed>| {
+            let lanes = grow_with_barriers(&pieces, &t, &p, &[], seen.map(|s| s.lookup()).as_ref());
+            assert_eq!(lanes.lines.len(), 1);
+            lanes.lines[0].class
+        };
+        assert_eq!(class(None), LaneLineClass::DashedLine);
+        assert_eq!(
+            class(Some(&test_seen_except(&t, 3.5, |_| false))),
+            LaneLineClass::DashedLine
+        );
+        assert_eq!(
+            class(Some(&test_seen_except(&t, 3.5, |_| true))),
+            LaneLineClass::SolidLine
+        );
     }
 }

@@ -28,6 +28,8 @@ pub mod io;
 pub mod lanes;
 /// The learned marking classifier (PointNet++ through ONNX Runtime).
 pub mod learned;
+/// Where the pavement was seen bare (dark points by cell), for lane-line growth.
+pub mod observed;
 /// Marking outlines: rectangles, buffered centrelines, alpha shapes (part of stage 6).
 pub mod outline;
 /// Every tunable parameter with its documented default, validated before any point is read.

@@ -26,7 +26,8 @@
 //! line (`stoplines`); lane-line growth with
 //! crosswalks and stop lines as barriers; line pieces whose width the points do not
 //! resolve widened to their lane line's width; gaps of solid lane lines bridged (short
-//! ones always, long ones between longer pieces); dashes put on their line's design
+//! ones always, long ones between longer pieces, and up to `lane_lines.max_unseen_gap_m`
+//! where the scanner saw no bare asphalt on the gap's course); dashes put on their line's design
 //! (`dashes`); ids in driving order.
 //!
 //! # Parameters
@@ -43,6 +44,7 @@ use super::crosswalks;
 use super::dashes;
 use super::geom;
 use super::lanes::{self, LanePiece};
+use super::observed::{Gap, Lookup};
 use super::outline;
 use super::pavement::check_range;
 use super::refline::RefLine;
@@ -834,7 +836,16 @@ fn lines_not_stop_lines(pieces: &mut [Piece], refl: &RefLine) {
 const MIN_OUTLINE_AREA_M2: f64 = 1e-3;
 
 /// Lane lines over all pieces, lane-context class corrections, stable ids.
-pub fn assemble(pieces: Vec<Piece>, traj_abs: &Trajectory, params: &Params) -> (Vec<Marking>, Vec<LaneLine>) {
+///
+/// `seen` (when the points were kept track of, see [`super::observed`]) tells where the
+/// scanner saw bare asphalt: lane lines link, and solid ones are bridged, across longer gaps
+/// it did not see.
+pub fn assemble(
+    pieces: Vec<Piece>,
+    traj_abs: &Trajectory,
+    params: &Params,
+    seen: Option<&Lookup<'_>>,
+) -> (Vec<Marking>, Vec<LaneLine>) {
     let refl = RefLine::new(traj_abs);
     let pieces = if params.regularize_crosswalks {
         regularise_crosswalks(pieces, &refl, params.fill_missing_stripes as usize)
@@ -867,7 +878,7 @@ pub fn assemble(pieces: Vec<Piece>, traj_abs: &Trajectory, params: &Params) -> (
         .filter(|p| matches!(p.marking.class, MarkingClass::StopLine | MarkingClass::Crosswalk))
         .map(|p| p.marking.outline.clone())
         .collect();
-    let lanes = lanes::grow_with_barriers(&lane_pieces, traj_abs, &params.lane_lines, &barriers);
+    let lanes = lanes::grow_with_barriers(&lane_pieces, traj_abs, &params.lane_lines, &barriers, seen);
     let mut pieces = pieces;
     for &(k, class) in &lanes.classes {
         pieces[k].marking.class = class;
@@ -886,7 +897,14 @@ pub fn assemble(pieces: Vec<Piece>, traj_abs: &Trajectory, params: &Params) -> (
                     continue;
                 }
                 let max_gap = gap_limit(a, b, params);
-                if let Some(bridge) = bridge(a, b, &l.line, max_gap) {
+                // Longer gaps the scanner did not see (its course holds no bare asphalt).
+                let unseen = || {
+                    let seen = seen?;
+                    let br = bridge(a, b, &l.line, params.lane_lines.max_unseen_gap_m)?;
+                    let course = br.centerline.as_deref()?;
+                    (seen.gap(course, 0.05) == Gap::Unseen).then_some(br)
+                };
+                if let Some(bridge) = bridge(a, b, &l.line, max_gap).or_else(unseen) {
                     bridges.push(bridge);
                 }
             }
@@ -962,7 +980,7 @@ pub fn run(
     let pieces = outlines(cloud, candidates, params);
     let o = cloud.origin;
     let traj_abs = traj_local.to_local([-o[0], -o[1], -o[2]]);
-    assemble(pieces, &traj_abs, params)
+    assemble(pieces, &traj_abs, params, None)
 }
 
 #[cfg(test)]
@@ -1124,5 +1142,28 @@ mod tests {
         let near = |p: [f64; 2], q: [f64; 2]| (p[0] - q[0]).hypot(p[1] - q[1]) < 1e-9;
         assert!(near(cl[0], [14.0, 26.5]) && near(cl[1], [19.0, 26.5]), "{cl:?}");
         assert!((pieces[1].marking.heading_deg - 90.0).abs() < 1e-9);
+    }
+
+    /// A 45 m gap of a solid lane line is bridged when the scanner did not see its course,
+    /// and not when it saw bare asphalt there.
+    #[test]
+    fn solid_lines_are_bridged_across_gaps_the_scanner_did_not_see() {
+        let traj = crate::pipeline::types::test_straight_trajectory(100, -20.0);
+        let at = |mut p: Piece| {
+            p.marking.outline.iter_mut().for_each(|q| q[1] += 3.5);
+            p.centerline.iter_mut().flatten().for_each(|q| q[1] += 3.5);
+            p
+        };
+        let pieces = || vec![at(solid(0.0, 15.0)), at(solid(60.0, 78.0))];
+        let p = Params::default();
+        let unseen = crate::pipeline::observed::test_seen_except(&traj, 3.5, |x| (15.0..60.0).contains(&x));
+        let (marks, lines) = assemble(pieces(), &traj, &p, Some(&unseen.lookup()));
+        assert_eq!(lines.len(), 1);
+        assert_eq!(marks.len(), 3);
+        let bridge = marks.iter().find(|m| m.point_count == 0).expect("a bridge");
+        assert!((bridge.length_m - 45.0).abs() < 0.1, "{}", bridge.length_m);
+        let bare = crate::pipeline::observed::test_seen_except(&traj, 3.5, |_| false);
+        let (marks, lines) = assemble(pieces(), &traj, &p, Some(&bare.lookup()));
+        assert_eq!((marks.len(), lines.len()), (2, 2));
     }
 }
