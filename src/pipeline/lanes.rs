@@ -48,8 +48,8 @@
 //!    chain that is solid for ≥ `min_length_m` and dashed elsewhere becomes two lane lines.
 //! 4. **Smooth centreline**: offset(s) by Gaussian local linear regression (bandwidth
 //!    `smoothing_m`) over the pieces' samples; across gaps wider than the bandwidth a cubic
-//!    Hermite joins the fitted ends (values and slopes), so the line follows the road's
-//!    curvature through occlusions. Sampled every `vertex_spacing_m`, mapped back through
+//!    Hermite joins the fitted ends (values and slopes, fitted over a quarter of the gap,
+//!    2–10 m), so the line follows the road's curvature through occlusions. Sampled every `vertex_spacing_m`, mapped back through
 //!    the reference frame and simplified (Douglas–Peucker, `simplify_tolerance_m`).
 //! 5. Lane lines shorter than `min_length_m` or whose pieces cover less than
 //!    `min_paint_share` of their length, and single pieces that are not solid, are
@@ -888,7 +888,19 @@ fn centreline(items: &[Item], members: &[usize], refl: &RefLine, p: &Params) -> 
     }
     stations.sort_by(f64::total_cmp);
     stations.dedup_by(|a, b| (*a - *b).abs() < 1e-6);
-    let ends: Vec<((f64, f64), (f64, f64))> = painted.iter().map(|iv| (fit(iv.0), fit(iv.1))).collect();
+    // Ends of each gap (value, slope), fitted over a quarter of the gap (at least the
+    // smoothing bandwidth, at most 10 m): across a long gap the line follows the trend of
+    // the paint on either side, not the slope of the last fragment (a 1 m far-range
+    // fragment's is off by degrees, which puts the middle of a 40 m gap decimetres off).
+    let gap_ends: Vec<((f64, f64), (f64, f64))> = painted
+        .windows(2)
+        .map(|w| {
+            let (a, b) = (w[0].1, w[1].0);
+            let hw = ((b - a) / 4.0).clamp(h, 10.0);
+            let wide = |s: f64| geom::local_linear(&xs, &ys, &ws, s, hw, 3.0).unwrap_or_else(|| fit(s));
+            (wide(a), wide(b))
+        })
+        .collect();
     let offset_at = |s: f64| -> f64 {
         let k = painted.partition_point(|iv| iv.1 < s);
         if k < painted.len() && s >= painted[k].0 {
@@ -899,7 +911,7 @@ fn centreline(items: &[Item], members: &[usize], refl: &RefLine, p: &Params) -> 
         }
         // In the gap between painted[k-1] and painted[k]: cubic Hermite.
         let (a, b) = (painted[k - 1].1, painted[k].0);
-        let ((oa, ta), (ob, tb)) = (ends[k - 1].1, ends[k].0);
+        let ((oa, ta), (ob, tb)) = gap_ends[k - 1];
         let l = b - a;
         let t = ((s - a) / l).clamp(0.0, 1.0);
         let (t2, t3) = (t * t, t * t * t);
@@ -1229,5 +1241,35 @@ mod tests {
             class(Some(&test_seen_except(&t, 3.5, |_| true))),
             LaneLineClass::SolidLine
         );
+    }
+
+    /// Across a 23 m gap the centreline follows the trend of the paint on either side, not
+    /// the slope of the 1 m fragment (tilted 0.1) that ends the paint before it.
+    #[test]
+    fn long_gaps_follow_the_trend_not_the_last_fragment() {
+        let t = traj();
+        let p = Params::default();
+        // Centrelines sampled every metre, as outlines give them.
+        let dense = |key: usize, x0: f64, x1: f64| LanePiece {
+            centerline: (0..=(x1 - x0) as usize).map(|i| [x0 + i as f64, 3.5]).collect(),
+            ..piece(key, x0, x1, MarkingClass::SolidLine)
+        };
+        let pieces = [
+            dense(0, 0.0, 20.0),
+            LanePiece {
+                centerline: vec![[20.5, 3.5], [21.5, 3.6]],
+                ..piece(1, 0.0, 0.0, MarkingClass::SolidLine)
+            },
+            dense(2, 45.0, 78.0),
+        ];
+        let lanes = grow(&pieces, &t, &p);
+        assert_eq!(lanes.lines.len(), 1);
+        let worst = lanes.lines[0]
+            .line
+            .iter()
+            .filter(|q| (25.0..40.0).contains(&q[0]))
+            .map(|q| (q[1] - 3.5).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < 0.05, "{worst}");
     }
 }
