@@ -242,73 +242,96 @@ const ROW_MAX_SPREAD_M: f64 = 0.02;
 /// length.
 const ROW_MAX_RELATIVE_SPREAD: f64 = 0.25;
 /// Longest row fragment considered (m): longer single rows are lines in their own right.
+/// Fragments that are not rows take part when they are this short both ways.
 const ROW_MAX_LENGTH_M: f64 = 1.0;
-/// Stacked fragments may be shifted along their rows by at most this share of their mean
-/// length (0.75: they still overlap by a quarter): rows that cross a bar obliquely (the
-/// ±35° planes of a butterfly pair of heads) are shifted by row spacing × sin(angle).
-const ROW_MIN_OVERLAP_SHIFT: f64 = 0.75;
-/// Largest angle between stacked row fragments (deg).
-const ROW_MAX_ANGLE_DEG: f64 = 15.0;
+/// Stacked fragments overlap along the row by at least this share of their mean length
+/// (projected on the row): rows that cross a bar obliquely (the ±35° planes of a butterfly
+/// pair of heads) are shifted by row spacing × sin(angle).
+const ROW_MIN_OVERLAP: f64 = 0.25;
+/// Largest angle between stacked row fragments (deg): the rows of two scanner heads cross
+/// a far bar at angles up to ~30° apart.
+const ROW_MAX_ANGLE_DEG: f64 = 35.0;
 
 /// Join stacked scan-row fragments: at far range a scanner samples the road in rows (one
 /// pulse index over consecutive scan lines) that are dense along the row and 0.3–0.6 m
 /// apart across it, so a painted bar crossed by several rows falls apart into thin
-/// parallel fragments. Two components (index groups into `xy`) that are each one row
-/// (spread across their axis ≤ [`ROW_MAX_SPREAD_M`] or [`ROW_MAX_RELATIVE_SPREAD`] of
-/// their length, length ≤ [`ROW_MAX_LENGTH_M`]), parallel within [`ROW_MAX_ANGLE_DEG`],
-/// side by side (overlapping along their rows by at least a quarter of their mean length,
-/// see [`ROW_MIN_OVERLAP_SHIFT`]) and at most `max_across` apart across the rows are
-/// joined. Collinear fragments (the next stripe along the same row, a dash after a gap)
-/// are never joined by this rule. Returns groups of indices into `comps`, each sorted,
-/// ordered by their first; symmetric and independent of the order of `comps`' members.
+/// parallel fragments; with two scanner heads, rows of the two heads that cross inside
+/// the bar also form small fragments that are not one row. A fragment that is one row
+/// (spread across its axis ≤ [`ROW_MAX_SPREAD_M`] or [`ROW_MAX_RELATIVE_SPREAD`] of its
+/// length, length ≤ [`ROW_MAX_LENGTH_M`]) is joined to a small fragment (at most
+/// [`ROW_MAX_LENGTH_M`] both ways) that lies beside it: overlapping it along the row by at
+/// least [`ROW_MIN_OVERLAP`] of their mean length and at most `max_across` from the row
+/// across it (nearest points). Two rows parallel within [`ROW_MAX_ANGLE_DEG`] must each
+/// lie beside the other; a "row" at a steeper angle is a stack of rows seen along the bar
+/// and counts as a small fragment. Collinear fragments (the next
+/// stripe along the same row, a dash after a gap) never overlap along the row and are never
+/// joined by this rule. Returns groups of indices into `comps`, each sorted, ordered by
+/// their first; symmetric and independent of the order of `comps`' members.
 pub fn join_row_fragments(xy: &[[f64; 2]], comps: &[Vec<usize>], max_across: f64) -> Vec<Vec<usize>> {
-    /// A one-row fragment: its principal frame centred on the middle of its extent.
-    struct Row {
+    /// A small fragment: its principal frame centred on the middle of its extent.
+    struct Frag {
         comp: usize,
         frame: Pca,
         half: f64,
+        row: bool,
     }
-    let rows: Vec<Row> = comps
+    let frags: Vec<Frag> = comps
         .iter()
         .enumerate()
         .filter(|(_, c)| c.len() >= 3)
         .filter_map(|(k, c)| {
             let pts: Vec<[f64; 2]> = c.iter().map(|&i| xy[i]).collect();
             let pca = Pca::of(&pts);
-            let (lo, hi) = pts
-                .iter()
-                .map(|&p| pca.to_frame(p)[0])
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), u| {
-                    (lo.min(u), hi.max(u))
-                });
-            let len = hi - lo;
-            let one_row = pca.var[1].sqrt() <= ROW_MAX_SPREAD_M.max(ROW_MAX_RELATIVE_SPREAD * len);
-            (one_row && len > 0.0 && len <= ROW_MAX_LENGTH_M).then(|| Row {
+            let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+            for &p in &pts {
+                let f = pca.to_frame(p);
+                for a in 0..2 {
+                    lo[a] = lo[a].min(f[a]);
+                    hi[a] = hi[a].max(f[a]);
+                }
+            }
+            let (len, wide) = (hi[0] - lo[0], hi[1] - lo[1]);
+            let row = pca.var[1].sqrt() <= ROW_MAX_SPREAD_M.max(ROW_MAX_RELATIVE_SPREAD * len);
+            (len > 0.0 && len <= ROW_MAX_LENGTH_M && wide <= ROW_MAX_LENGTH_M).then(|| Frag {
                 comp: k,
                 frame: Pca {
-                    center: pca.from_frame([0.5 * (lo + hi), 0.0]),
+                    center: pca.from_frame([0.5 * (lo[0] + hi[0]), 0.0]),
                     ..pca
                 },
                 half: 0.5 * len,
+                row,
             })
         })
         .collect();
     let mut parent: Vec<usize> = (0..comps.len()).collect();
-    let centers: Vec<[f64; 2]> = rows.iter().map(|r| r.frame.center).collect();
-    let grid = GridIndex::new(&centers, max_across.max(ROW_MAX_LENGTH_M / 2.0));
-    // Each must see the other beside it, in its own frame.
-    let beside = |r: &Row, o: &Row| {
-        let [along, across] = r.frame.to_frame(o.frame.center);
-        along.abs() <= ROW_MIN_OVERLAP_SHIFT * (r.half + o.half) && across.abs() <= max_across
+    let centers: Vec<[f64; 2]> = frags.iter().map(|r| r.frame.center).collect();
+    let grid = GridIndex::new(&centers, max_across + ROW_MAX_LENGTH_M);
+    // `o` lies beside the row `r`: overlapping it along the row, near it across.
+    let beside = |r: &Frag, o: &Frag| {
+        let (mut lo, mut hi, mut near) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY);
+        for &i in &comps[o.comp] {
+            let [along, across] = r.frame.to_frame(xy[i]);
+            lo = lo.min(along);
+            hi = hi.max(along);
+            near = near.min(across.abs());
+        }
+        let overlap = hi.min(r.half) - lo.max(-r.half);
+        overlap >= ROW_MIN_OVERLAP * (r.half + 0.5 * (hi - lo)) && near <= max_across
     };
-    for (a, ra) in rows.iter().enumerate() {
-        for b in grid.around(ra.frame.center, 1).filter(|&b| b > a) {
-            let rb = &rows[b];
-            if acute_angle_deg(ra.frame.axis, rb.frame.axis) <= ROW_MAX_ANGLE_DEG
-                && beside(ra, rb)
-                && beside(rb, ra)
-            {
-                union(&mut parent, ra.comp, rb.comp);
+    for (a, fa) in frags.iter().enumerate() {
+        for b in grid.around(fa.frame.center, 1).filter(|&b| b > a) {
+            let fb = &frags[b];
+            // Two parallel rows must each lie beside the other; a row at a steep angle to
+            // the other is a stack of rows read along the bar (its spread is a share of
+            // its length) and counts as a small fragment, like one that is not a row.
+            let parallel = acute_angle_deg(fa.frame.axis, fb.frame.axis) <= ROW_MAX_ANGLE_DEG;
+            let joined = if fa.row && fb.row && parallel {
+                beside(fa, fb) && beside(fb, fa)
+            } else {
+                (fa.row && beside(fa, fb)) || (fb.row && beside(fb, fa))
+            };
+            if joined {
+                union(&mut parent, fa.comp, fb.comp);
             }
         }
     }
@@ -814,6 +837,35 @@ mod tests {
         let second = joined.iter().find(|g| g.contains(&9)).unwrap();
         assert_eq!(second.len(), 45);
         assert!(joined.iter().any(|g| g.len() == 60));
+    }
+
+    /// Two scanner heads: a far stripe (0.45 m along the rows, 3 m across) is crossed by rows
+    /// tilted +15° and −12°, and where two rows cross they form one fragment that is not a
+    /// row (or reads as a "row" along the stripe). All of them join into the stripe; the
+    /// next stripe 1 m further along the rows stays apart.
+    #[test]
+    fn two_head_row_stacks_join_into_their_stripe() {
+        let mut xy = Vec::new();
+        let mut comps = Vec::new();
+        let mut add = |pts: Vec<[f64; 2]>| {
+            comps.push((xy.len()..xy.len() + pts.len()).collect::<Vec<usize>>());
+            xy.extend(pts);
+        };
+        let dir = |deg: f64| [deg.to_radians().cos(), deg.to_radians().sin()];
+        for stripe in 0..2 {
+            let x0 = stripe as f64 * 1.0;
+            for (r, y) in [0.0, 0.45, 0.9, 1.8, 2.25, 2.7].into_iter().enumerate() {
+                let deg = if r % 2 == 0 { 15.0 } else { -12.0 };
+                add(row([x0, y], dir(deg), 9));
+            }
+            // Two crossing rows at 1.3-1.45 m make one X-shaped fragment.
+            let mut cross = row([x0, 1.3], dir(15.0), 9);
+            cross.extend(row([x0, 1.45], dir(-15.0), 9));
+            add(cross);
+        }
+        let joined = join_row_fragments(&xy, &comps, 0.6);
+        assert_eq!(joined.len(), 2, "{joined:?}");
+        assert_eq!(joined[0], (0..7).collect::<Vec<_>>());
     }
 
     #[test]
