@@ -558,6 +558,10 @@ fn merge_parallel_chains(items: &[Item], chains: Vec<Vec<usize>>) -> Vec<Vec<usi
     merge_overlaps(sorted).into_iter().map(|m| m.keys).collect()
 }
 
+/// Largest offset difference at which overlapping pieces or chains are one line (m): less
+/// than the 0.2-0.3 m between the centres of a double line's two lines.
+const MAX_MERGE_OFFSET_M: f64 = 0.18;
+
 /// Longest gap between a chain's samples across which [`median_offset_in`] interpolates (m).
 const INTERPOLATED_GAP_M: f64 = 20.0;
 
@@ -593,13 +597,19 @@ fn median_offset_in(so: &[[f64; 2]], a: f64, b: f64) -> Option<f64> {
 /// lengthwise into strips, duplicates from two scanner heads or overlapping chunks): they
 /// overlap along the road by ≥ 0.5 m (or half the shorter one) and their median offsets
 /// over the overlap — and over its first and last thirds, when those are ≥ 1 m — differ by
-/// less than half the wider piece plus 5 cm. Side-by-side lines (≥ 0.25 m centre to
-/// centre) are never merged. Input sorted by start; output too.
+/// less than half the wider piece plus 5 cm (at most [`MAX_MERGE_OFFSET_M`]). Side-by-side
+/// lines (≥ 0.25 m centre to centre) are never merged, not even through a third piece
+/// close to both (merges go closest first and never join two side-by-side pieces). Input
+/// sorted by start; output too.
 fn merge_overlaps(items: Vec<Item>) -> Vec<Item> {
     let n = items.len();
     let mut parent: Vec<usize> = (0..n).collect();
     let ext = |it: &Item| (it.so[0][0], it.so[it.so.len() - 1][0]);
-    let mut any = false;
+    // Pairs to merge (with their offset difference) and pairs side by side: two lines that
+    // may never end up in one group, not even through a third piece (a worn double line's
+    // piece that holds both lines lies within the tolerance of each).
+    let mut merge: Vec<(f64, usize, usize)> = Vec::new();
+    let mut apart: std::collections::HashSet<(usize, usize)> = std::collections::HashSet::new();
     for i in 0..n {
         let (a0, a1) = ext(&items[i]);
         for j in i + 1..n {
@@ -612,7 +622,8 @@ fn merge_overlaps(items: Vec<Item>) -> Vec<Item> {
             if ov < 0.5_f64.min(0.5 * (a1 - a0).min(b1 - b0)) {
                 continue;
             }
-            let tol = 0.5 * items[i].width.max(items[j].width) + 0.05;
+            // Never as far as the other line of a double line (centres 0.2-0.3 m apart).
+            let tol = (0.5 * items[i].width.max(items[j].width) + 0.05).min(MAX_MERGE_OFFSET_M);
             let (Some(oa), Some(ob)) = (
                 median_offset_in(&items[i].so, lo, hi),
                 median_offset_in(&items[j].so, lo, hi),
@@ -634,11 +645,35 @@ fn merge_overlaps(items: Vec<Item>) -> Vec<Item> {
                         _ => true,
                     }
                 });
-            if (oa - ob).abs() < tol && ends_agree {
-                geom::union(&mut parent, i, j);
-                any = true;
+            let d = (oa - ob).abs();
+            if d < tol && ends_agree {
+                merge.push((d, i, j));
+            } else if d >= MAX_MERGE_OFFSET_M {
+                apart.insert((i, j));
             }
         }
+    }
+    let any = !merge.is_empty();
+    // Closest pairs first; a merge that would put two side-by-side pieces in one group is
+    // refused.
+    merge.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+    let mut members: Vec<Vec<usize>> = (0..n).map(|i| vec![i]).collect();
+    for (_, i, j) in merge {
+        let (ri, rj) = (geom::find_root(&mut parent, i), geom::find_root(&mut parent, j));
+        if ri == rj {
+            continue;
+        }
+        let clash = members[ri]
+            .iter()
+            .any(|&a| members[rj].iter().any(|&b| apart.contains(&(a.min(b), a.max(b)))));
+        if clash {
+            continue;
+        }
+        geom::union(&mut parent, ri, rj);
+        let root = geom::find_root(&mut parent, ri);
+        let other = if root == ri { rj } else { ri };
+        let moved = std::mem::take(&mut members[other]);
+        members[root].extend(moved);
     }
     if !any {
         return items;
@@ -1091,6 +1126,36 @@ mod tests {
         assert_eq!(
             merge_overlaps(vec![far_apart, frags(1, &[(12.0, 14.0)], 16.4)]).len(),
             2
+        );
+    }
+
+    /// A worn double line (centres 0.3 m apart): the two lines stay apart even where a
+    /// piece holds both of them (0.5 m wide, centred between them) and overlaps each; a
+    /// piece of the same line split lengthwise (0.1 m apart) is merged.
+    #[test]
+    fn a_double_line_is_never_merged_into_one() {
+        let line = |key: usize, a: f64, b: f64, o: f64, width: f64| Item {
+            keys: vec![key],
+            so: (0..=((b - a) / 0.25) as usize)
+                .map(|i| [a + 0.25 * i as f64, o])
+                .collect(),
+            width,
+            conf: 0.8,
+        };
+        let lower = || line(0, 0.0, 10.0, 5.4, 0.15);
+        let upper = || line(1, 0.0, 10.0, 5.7, 0.15);
+        assert_eq!(merge_overlaps(vec![lower(), upper()]).len(), 2);
+        // With the wide piece the three may not become one line (they would with a
+        // tolerance of half the widest piece: 0.3 m).
+        let with_both = merge_overlaps(vec![lower(), upper(), line(2, 2.0, 8.0, 5.55, 0.5)]);
+        assert!(
+            with_both.len() >= 2,
+            "{:?}",
+            with_both.iter().map(|i| &i.keys).collect::<Vec<_>>()
+        );
+        assert_eq!(
+            merge_overlaps(vec![lower(), line(3, 1.0, 9.0, 5.5, 0.15)]).len(),
+            1
         );
     }
 
