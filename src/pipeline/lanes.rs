@@ -246,6 +246,12 @@ impl Seg {
     }
 }
 
+/// Lateral uncertainty (m) of a segment's end direction over its span: [`SLOPE_NOISE_M`],
+/// or half its width for a wide piece whose direction its outline hardly fixes.
+fn slope_noise(s: &Seg) -> f64 {
+    SLOPE_NOISE_M.max(0.5 * s.width)
+}
+
 /// Least-squares slope do/ds of samples with s within `span` of the start or end.
 fn end_slope(so: &[[f64; 2]], at_end: bool, span: f64) -> f64 {
     if so.len() < 2 {
@@ -331,13 +337,20 @@ fn link(
             let slack = ((SLOPE_NOISE_M / sa.span()).atan() + (SLOPE_NOISE_M / sb.span()).atan())
                 * (SLACK_GAP_M / g.max(1e-6)).min(1.0);
             let turn = (sa.slope1.atan() - sb.slope0.atan()).abs();
-            if dev > tol || turn > max_tan + slack || g > p.max_gap_m {
+            // Where the offsets only meet by extrapolating the slopes, the extrapolation must
+            // be trustworthy: the slope of a piece L long and w wide is uncertain by about
+            // max(SLOPE_NOISE_M, w/2) / L, so over half the gap each end may be off by that
+            // times g/2. A short wide blob (both lines of a worn double line, an arrow's
+            // head) does not steer a link metres sideways across a long gap.
+            let flat = (sa.o1 - sb.o0).abs();
+            let unsure = 0.5 * g * (slope_noise(sa) / sa.span() + slope_noise(sb) / sb.span());
+            let extrapolated = flat > tol && unsure > tol;
+            if dev > tol || turn > max_tan + slack || g > p.max_gap_m || extrapolated {
                 // Across a gap the scanner did not see, the pieces on either side are all
                 // the evidence there is of the line: a short fragment's own slope (a 1 m
                 // far-range piece's is off by several degrees) is not extrapolated, and its
                 // direction counts with its full uncertainty however long the gap.
                 let full_slack = (SLOPE_NOISE_M / sa.span()).atan() + (SLOPE_NOISE_M / sb.span()).atan();
-                let flat = (sa.o1 - sb.o0).abs();
                 if g > p.max_unseen_gap_m
                     || dev.min(flat) > tol
                     || turn > max_tan + full_slack
@@ -987,6 +1000,39 @@ mod tests {
             width_m: 0.15,
             confidence: 0.9,
         }
+    }
+
+    /// Offsets that only meet by extrapolating slopes: two 15 m pieces of a line drifting
+    /// across the trajectory (2.7°, 1.75 m over the 37 m gap) are linked; a 2 m blob 0.47 m
+    /// wide with the same slope, whose direction its outline hardly fixes, is not linked to
+    /// a piece 1.75 m beside it 37 m on. At the same offset the blob still links.
+    #[test]
+    fn short_wide_blobs_do_not_steer_links_sideways() {
+        let seg = |s0: f64, s1: f64, o0: f64, slope: f64, width: f64| Seg {
+            members: vec![],
+            s0,
+            s1,
+            o0,
+            o1: o0 + slope * (s1 - s0),
+            slope0: slope,
+            slope1: slope,
+            width,
+        };
+        let p = Params::default();
+        let none = |_: [f64; 2], _: [f64; 2]| false;
+        let k = 0.047;
+        let long = [
+            seg(0.0, 15.0, 5.36 - 15.0 * k, k, 0.15),
+            seg(52.0, 67.0, 7.11, k, 0.15),
+        ];
+        assert_eq!(link(&long, &p, &[], &none), vec![vec![0, 1]]);
+        let blob = [
+            seg(0.0, 2.0, 5.36 - 2.0 * k, k, 0.47),
+            seg(39.0, 41.8, 7.11, k, 0.25),
+        ];
+        assert_eq!(link(&blob, &p, &[], &none), vec![vec![0], vec![1]]);
+        let level = [seg(0.0, 2.0, 5.36, 0.0, 0.47), seg(39.0, 41.8, 5.4, 0.0, 0.25)];
+        assert_eq!(link(&level, &p, &[], &none), vec![vec![0, 1]]);
     }
 
     /// Two 1 m solid fragments 30 m apart cover 6 % of the line they would span: no lane
