@@ -504,6 +504,8 @@ pub struct Component {
     pub width_m: f64,
     /// area / (length · width): ≈ 1 for bars, ≈ 1.05 for discs, lower for irregular shapes.
     pub fill: f64,
+    /// Pixel bounding box: first column, first row, last column, last row.
+    pub bbox: [usize; 4],
 }
 
 /// 8-connected labels (0 = background, 1.. = components in raster order) and their shapes.
@@ -521,8 +523,15 @@ pub fn label(mask: &Raster<u8>) -> (Vec<u32>, Vec<Component>) {
         labels[start] = id;
         stack.push(start);
         let (mut n, mut sx, mut sy, mut sxx, mut syy, mut sxy) = (0usize, 0f64, 0f64, 0f64, 0f64, 0f64);
+        let mut bbox = [start % w, start / w, start % w, start / w];
         while let Some(k) = stack.pop() {
             let (x, y) = ((k % w) as f64, (k / w) as f64);
+            bbox = [
+                bbox[0].min(k % w),
+                bbox[1].min(k / w),
+                bbox[2].max(k % w),
+                bbox[3].max(k / w),
+            ];
             n += 1;
             sx += x;
             sy += y;
@@ -561,6 +570,7 @@ pub fn label(mask: &Raster<u8>) -> (Vec<u32>, Vec<Component>) {
             length_m,
             width_m,
             fill: nf * cell * cell / (length_m * width_m),
+            bbox,
         });
     }
     (labels, comps)
@@ -669,19 +679,106 @@ pub fn segment(img: &Raster<f32>, p: &Params) -> Segmentation {
             values[*l as usize - 1].push(smooth.data[k]);
         }
     }
-    let levels = values
+    let mut levels: Vec<f32> = values
         .into_iter()
         .map(|mut v| {
             let mid = v.len() / 2;
             *v.select_nth_unstable_by(mid, f32::total_cmp).1
         })
         .collect();
+    // Rims of bright surfaces: kept components that enclose a large hole as bright as
+    // themselves are dropped (their label becomes 0); labels are not renumbered.
+    let mut rims = 0;
+    for (i, c) in comps.iter().enumerate() {
+        let l = keep[i + 1];
+        if l != 0 && bright_rim(&labels, &smooth, c, l, levels[l as usize - 1]) {
+            rims += 1;
+            for row in c.bbox[1]..=c.bbox[3] {
+                for col in c.bbox[0]..=c.bbox[2] {
+                    let k = row * mask.width + col;
+                    if labels[k] == l {
+                        labels[k] = 0;
+                        mask.data[k] = 0;
+                    }
+                }
+            }
+            levels[l as usize - 1] = f32::NAN;
+        }
+    }
     Segmentation {
         mask,
         labels,
         levels,
-        dropped: (small, blob),
+        dropped: (small, blob + rims),
     }
+}
+
+/// Smallest side (m) of a component's bounding box for the bright-rim test.
+const RIM_MIN_SIDE_M: f64 = 1.5;
+/// Smallest share of the bounding box the enclosed hole must cover.
+const RIM_MIN_HOLE_SHARE: f64 = 0.3;
+/// The hole is "as bright" when its median value lies at least this share of the way
+/// from the asphalt (1) to the component's level.
+const RIM_HOLE_BRIGHTNESS: f32 = 0.5;
+
+/// Is component `c` (label `l`, median value `level`) the rim of a bright surface — a
+/// concrete patch, a plate — rather than paint? Bradley–Roth marks only the border of a
+/// uniformly bright area wider than its window, so such an area comes out as a ring whose
+/// enclosed hole is as bright as the ring. A painted outline (a diamond, a box) encloses
+/// asphalt, and no road marking is a filled area metres wide both ways.
+/// Written here: a flood fill of the background from the bounding box's border.
+fn bright_rim(labels: &[u32], smooth: &Raster<f32>, c: &Component, l: u32, level: f32) -> bool {
+    let cell = smooth.cell_m;
+    let (c0, r0, c1, r1) = (c.bbox[0], c.bbox[1], c.bbox[2], c.bbox[3]);
+    let (bw, bh) = (c1 - c0 + 1, r1 - r0 + 1);
+    if (bw.min(bh) as f64) * cell < RIM_MIN_SIDE_M || !level.is_finite() || level <= 1.0 {
+        return false;
+    }
+    // Outside: background reachable from the box's border without crossing the component.
+    let at = |bx: usize, by: usize| (r0 + by) * smooth.width + c0 + bx;
+    let mut outside = vec![false; bw * bh];
+    let mut stack: Vec<usize> = Vec::new();
+    for by in 0..bh {
+        for bx in 0..bw {
+            if (bx == 0 || by == 0 || bx == bw - 1 || by == bh - 1) && labels[at(bx, by)] != l {
+                outside[by * bw + bx] = true;
+                stack.push(by * bw + bx);
+            }
+        }
+    }
+    while let Some(k) = stack.pop() {
+        let (bx, by) = (k % bw, k / bw);
+        for (dx, dy) in [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)] {
+            let (x, y) = (bx as i64 + dx, by as i64 + dy);
+            if x < 0 || y < 0 || x >= bw as i64 || y >= bh as i64 {
+                continue;
+            }
+            let kk = y as usize * bw + x as usize;
+            if !outside[kk] && labels[at(x as usize, y as usize)] != l {
+                outside[kk] = true;
+                stack.push(kk);
+            }
+        }
+    }
+    let mut hole: Vec<f32> = Vec::new();
+    let mut hole_px = 0usize;
+    for by in 0..bh {
+        for bx in 0..bw {
+            if !outside[by * bw + bx] && labels[at(bx, by)] != l {
+                hole_px += 1;
+                let v = smooth.data[at(bx, by)];
+                if v.is_finite() {
+                    hole.push(v);
+                }
+            }
+        }
+    }
+    if (hole_px as f64) < RIM_MIN_HOLE_SHARE * (bw * bh) as f64 || hole.len() * 2 < hole_px {
+        return false;
+    }
+    let mid = hole.len() / 2;
+    let v = *hole.select_nth_unstable_by(mid, f32::total_cmp).1;
+    v >= 1.0 + RIM_HOLE_BRIGHTNESS * (level - 1.0)
 }
 
 /// Fill runs of at most `gap_px` unobserved pixels (NaN in `img`, background in `mask`)
@@ -1174,6 +1271,41 @@ mod tests {
         assert_eq!(*seg.mask.get(100, 21), 1);
         assert_eq!(*seg.mask.get(100, 60), 0);
         assert_eq!(*seg.mask.get(150, 80), 0);
+    }
+
+    /// A uniformly bright 2.5 × 3 m surface (a concrete patch) comes out of Bradley–Roth as
+    /// its rim around a hole as bright as the rim: dropped. A painted diamond outline
+    /// (0.2 m lines) of the same size encloses asphalt: kept.
+    #[test]
+    fn rims_of_bright_surfaces_are_dropped_painted_outlines_kept() {
+        let img = raster(240, 100, |x, y| {
+            let patch = (20..70).contains(&x) && (20..80).contains(&y);
+            // Diamond centred at (170, 50): |dx|/40 + |dy|/30 = 1, 4 px thick.
+            let (dx, dy) = ((x as f32 - 170.0).abs() / 40.0, (y as f32 - 50.0).abs() / 30.0);
+            let diamond = ((dx + dy) - 1.0).abs() * 30.0 <= 2.0;
+            if patch || diamond { 3.5 } else { 1.0 }
+        });
+        let seg = segment(&img, &Params::default());
+        // The patch's interior is not foreground (a rim at most) and the rim is gone too.
+        assert!((20..70).all(|x| *seg.mask.get(x, 20) == 0 && *seg.mask.get(x, 50) == 0));
+        assert_eq!(*seg.mask.get(20, 50), 0);
+        // The diamond's lines stay.
+        assert_eq!(*seg.mask.get(130, 50), 1);
+        assert_eq!(*seg.mask.get(170, 20), 1);
+        let off = segment(
+            &raster(240, 100, |x, y| {
+                if (20..70).contains(&x) && (20..80).contains(&y) {
+                    3.5
+                } else {
+                    1.0
+                }
+            }),
+            &Params {
+                blob_min_fill: 2.0,
+                ..Params::default()
+            },
+        );
+        assert_eq!(off.dropped.1, 1, "the rim counts as a dropped blob");
     }
 
     /// Far range: the data come in rows (along x) 0.45 m apart with 0.15 m of no-data
