@@ -715,18 +715,21 @@ pub fn segment(img: &Raster<f32>, p: &Params) -> Segmentation {
 
 /// Smallest side (m) of a component's bounding box for the bright-rim test.
 const RIM_MIN_SIDE_M: f64 = 1.5;
-/// Smallest share of the bounding box the enclosed hole must cover.
-const RIM_MIN_HOLE_SHARE: f64 = 0.3;
-/// The hole is "as bright" when its median value lies at least this share of the way
-/// from the asphalt (1) to the component's level.
+/// Width (m) of the band along the bounding box's border where a rim lies; the rest of
+/// the box is its core.
+const RIM_BAND_M: f64 = 0.5;
+/// Largest share of the component's pixels in the core: a rim, not a filled shape.
+const RIM_MAX_CORE_SHARE: f64 = 0.2;
+/// The core is "as bright" when the median value of its background pixels lies at least
+/// this share of the way from the asphalt (1) to the component's level.
 const RIM_HOLE_BRIGHTNESS: f32 = 0.5;
 
 /// Is component `c` (label `l`, median value `level`) the rim of a bright surface — a
 /// concrete patch, a plate — rather than paint? Bradley–Roth marks only the border of a
-/// uniformly bright area wider than its window, so such an area comes out as a ring whose
-/// enclosed hole is as bright as the ring. A painted outline (a diamond, a box) encloses
-/// asphalt, and no road marking is a filled area metres wide both ways.
-/// Written here: a flood fill of the background from the bounding box's border.
+/// uniformly bright area wider than its window, so such an area comes out as a ring (open
+/// where the patch's edge is faint) around a core that is background yet as bright as the
+/// ring. A painted outline (a diamond, a box) encloses asphalt, and no road marking is a
+/// filled area metres wide both ways. Written here: a scan of the bounding box.
 fn bright_rim(labels: &[u32], smooth: &Raster<f32>, c: &Component, l: u32, level: f32) -> bool {
     let cell = smooth.cell_m;
     let (c0, r0, c1, r1) = (c.bbox[0], c.bbox[1], c.bbox[2], c.bbox[3]);
@@ -734,46 +737,25 @@ fn bright_rim(labels: &[u32], smooth: &Raster<f32>, c: &Component, l: u32, level
     if (bw.min(bh) as f64) * cell < RIM_MIN_SIDE_M || !level.is_finite() || level <= 1.0 {
         return false;
     }
-    // Outside: background reachable from the box's border without crossing the component.
-    let at = |bx: usize, by: usize| (r0 + by) * smooth.width + c0 + bx;
-    let mut outside = vec![false; bw * bh];
-    let mut stack: Vec<usize> = Vec::new();
-    for by in 0..bh {
-        for bx in 0..bw {
-            if (bx == 0 || by == 0 || bx == bw - 1 || by == bh - 1) && labels[at(bx, by)] != l {
-                outside[by * bw + bx] = true;
-                stack.push(by * bw + bx);
-            }
-        }
-    }
-    while let Some(k) = stack.pop() {
-        let (bx, by) = (k % bw, k / bw);
-        for (dx, dy) in [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)] {
-            let (x, y) = (bx as i64 + dx, by as i64 + dy);
-            if x < 0 || y < 0 || x >= bw as i64 || y >= bh as i64 {
-                continue;
-            }
-            let kk = y as usize * bw + x as usize;
-            if !outside[kk] && labels[at(x as usize, y as usize)] != l {
-                outside[kk] = true;
-                stack.push(kk);
-            }
-        }
-    }
+    let band = (RIM_BAND_M / cell).round() as usize;
+    let (mut in_core, mut core_px, mut own) = (0usize, 0usize, 0usize);
     let mut hole: Vec<f32> = Vec::new();
-    let mut hole_px = 0usize;
-    for by in 0..bh {
-        for bx in 0..bw {
-            if !outside[by * bw + bx] && labels[at(bx, by)] != l {
-                hole_px += 1;
-                let v = smooth.data[at(bx, by)];
-                if v.is_finite() {
-                    hole.push(v);
+    for row in r0..=r1 {
+        for col in c0..=c1 {
+            let k = row * smooth.width + col;
+            let core = col >= c0 + band && col + band <= c1 && row >= r0 + band && row + band <= r1;
+            if labels[k] == l {
+                own += 1;
+                in_core += usize::from(core);
+            } else if core {
+                core_px += 1;
+                if labels[k] == 0 && smooth.data[k].is_finite() {
+                    hole.push(smooth.data[k]);
                 }
             }
         }
     }
-    if (hole_px as f64) < RIM_MIN_HOLE_SHARE * (bw * bh) as f64 || hole.len() * 2 < hole_px {
+    if own == 0 || in_core as f64 > RIM_MAX_CORE_SHARE * own as f64 || hole.len() * 2 < core_px.max(1) {
         return false;
     }
     let mid = hole.len() / 2;
@@ -1274,8 +1256,9 @@ mod tests {
     }
 
     /// A uniformly bright 2.5 × 3 m surface (a concrete patch) comes out of Bradley–Roth as
-    /// its rim around a hole as bright as the rim: dropped. A painted diamond outline
-    /// (0.2 m lines) of the same size encloses asphalt: kept.
+    /// its rim around a core as bright as the rim: dropped, also when one side of the patch
+    /// is faint (an open ring). A painted diamond outline (0.2 m lines) of the same size
+    /// encloses asphalt: kept.
     #[test]
     fn rims_of_bright_surfaces_are_dropped_painted_outlines_kept() {
         let img = raster(240, 100, |x, y| {
@@ -1306,6 +1289,26 @@ mod tests {
             },
         );
         assert_eq!(off.dropped.1, 1, "the rim counts as a dropped blob");
+        // One side 1.2 m long fades into the asphalt: the ring is open, still a rim.
+        let open = segment(
+            &raster(100, 100, |x, y| {
+                let patch = (20..70).contains(&x) && (20..80).contains(&y);
+                let faint = x >= 60 && (35..60).contains(&y);
+                if patch && !faint {
+                    3.5
+                } else if patch {
+                    1.3
+                } else {
+                    1.0
+                }
+            }),
+            &Params {
+                blob_min_fill: 2.0,
+                ..Params::default()
+            },
+        );
+        assert_eq!(open.dropped.1, 1);
+        assert!(open.mask.data.iter().all(|&m| m == 0));
     }
 
     /// Far range: the data come in rows (along x) 0.45 m apart with 0.15 m of no-data
