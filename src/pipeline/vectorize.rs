@@ -103,6 +103,11 @@ pub struct Params {
     /// cut by a lane line's end) are joined into it, across gaps up to 1.5 m (see
     /// `stoplines`). Default true.
     pub join_stop_lines: bool,
+    /// A dash that belongs to no lane line becomes `unknown`: a dashed line is a row of
+    /// dashes, and a lone bar along the road with the size of a dash is as often a piece of
+    /// something else (a fragment of a solid line or an arrow, a sealant streak) as a dash
+    /// whose neighbours were not seen. Default true.
+    pub isolated_dashes_unknown: bool,
     /// Lane-line growth.
     pub lane_lines: lanes::Params,
 }
@@ -121,6 +126,7 @@ impl Default for Params {
             regularize_crosswalks: true,
             fill_missing_stripes: 1,
             join_stop_lines: true,
+            isolated_dashes_unknown: true,
             lane_lines: lanes::Params::default(),
         }
     }
@@ -883,6 +889,17 @@ pub fn assemble(
     for &(k, class) in &lanes.classes {
         pieces[k].marking.class = class;
     }
+    if params.isolated_dashes_unknown {
+        let mut in_lane = vec![false; pieces.len()];
+        for &(k, _) in &lanes.classes {
+            in_lane[k] = true;
+        }
+        for (p, _) in pieces.iter_mut().zip(&in_lane).filter(|(_, inl)| !**inl) {
+            if p.marking.class == MarkingClass::DashedLine {
+                p.marking.class = MarkingClass::Unknown;
+            }
+        }
+    }
     if params.widen_undersampled {
         widen_undersampled(&mut pieces, &lanes.lines, params.outline_simplify_m);
     }
@@ -1142,6 +1159,36 @@ mod tests {
         let near = |p: [f64; 2], q: [f64; 2]| (p[0] - q[0]).hypot(p[1] - q[1]) < 1e-9;
         assert!(near(cl[0], [14.0, 26.5]) && near(cl[1], [19.0, 26.5]), "{cl:?}");
         assert!((pieces[1].marking.heading_deg - 90.0).abs() < 1e-9);
+    }
+
+    /// Six 2/4 m dashes make a dashed lane line and stay dashes; a lone dash 3.5 m beside
+    /// them belongs to no lane line and is `unknown` (unless the rule is off).
+    #[test]
+    fn dashes_outside_every_lane_line_are_unknown() {
+        let traj = crate::pipeline::types::test_straight_trajectory(100, -20.0);
+        let dash = |x0: f64, y: f64| {
+            let mut p = solid(x0, x0 + 2.0);
+            p.marking.class = MarkingClass::DashedLine;
+            p.marking.outline.iter_mut().for_each(|q| q[1] += y);
+            p.centerline.iter_mut().flatten().for_each(|q| q[1] += y);
+            p
+        };
+        let pieces = || {
+            let mut v: Vec<Piece> = (0..6).map(|i| dash(6.0 * i as f64, 3.5)).collect();
+            v.push(dash(14.0, 7.0));
+            v
+        };
+        let (marks, lines) = assemble(pieces(), &traj, &Params::default(), None);
+        assert_eq!(lines.len(), 1);
+        let count = |ms: &[Marking], c: MarkingClass| ms.iter().filter(|m| m.class == c).count();
+        assert_eq!(count(&marks, MarkingClass::DashedLine), 6);
+        assert_eq!(count(&marks, MarkingClass::Unknown), 1);
+        let off = Params {
+            isolated_dashes_unknown: false,
+            ..Params::default()
+        };
+        let (marks, _) = assemble(pieces(), &traj, &off, None);
+        assert_eq!(count(&marks, MarkingClass::DashedLine), 7);
     }
 
     /// A 45 m gap of a solid lane line is bridged when the scanner did not see its course,
