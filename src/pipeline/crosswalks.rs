@@ -28,7 +28,8 @@
 //!    when parallel: then it is a misread stripe), and whose centre is within
 //!    `W/2 + 0.15 m` of a stripe's position: a seen stripe, a grid position between seen
 //!    ones on a regular grid, or up to [`MAX_EDGE_SLOTS`] grid positions outward of them
-//!    (each only if every position nearer the crossing has fragments too).
+//!    (each only if the positions nearer the crossing have fragments too, or at most
+//!    `fill_max` consecutive ones are empty: those are then filled).
 //! 5. Edits: each seen stripe gets the design rectangle at its own centre line and absorbs
 //!    the fragments at its position; a grid position with fragments only becomes a stripe
 //!    (the largest fragment, reclassified); on a regular grid, up to `fill_max` consecutive
@@ -375,24 +376,37 @@ fn regularise_group(
             taken[i] = true;
         }
     }
-    // Outward positions count only while each one nearer the crossing has fragments too.
+    // Outward positions count while the crossing continues: each one nearer the crossing
+    // has fragments too, or at most `fill_max` consecutive ones are empty (a stripe worn
+    // away entirely between two that left fragments); those empty ones then lie inside
+    // the crossing and are filled like the gaps between seen stripes.
     slots.sort_by(|x, y| x.c.total_cmp(&y.c));
     for side in [-1.0, 1.0] {
         let mut open = true;
+        let mut empty: Vec<usize> = Vec::new();
         for j in 1..=MAX_EDGE_SLOTS {
-            let Some(s) = slots
-                .iter_mut()
-                .find(|s| s.edge == j && if side < 0.0 { s.c < c_min } else { s.c > c_max })
+            let Some(k) = slots
+                .iter()
+                .position(|s| s.edge == j && if side < 0.0 { s.c < c_min } else { s.c > c_max })
             else {
                 continue;
             };
-            open &= !s.frags.is_empty();
-            if !open {
-                for &i in &s.frags {
-                    taken[i] = false;
+            if open && !slots[k].frags.is_empty() {
+                for &e in &empty {
+                    slots[e].edge = 0;
                 }
-                s.frags.clear();
+                empty.clear();
+                continue;
             }
+            if open && slots[k].frags.is_empty() {
+                empty.push(k);
+                open = empty.len() <= fill_max;
+                continue;
+            }
+            for &i in &slots[k].frags {
+                taken[i] = false;
+            }
+            slots[k].frags.clear();
         }
     }
     // 5. Edits.
@@ -506,7 +520,14 @@ pub(crate) mod tests {
         // stripes), and a fragment three positions beyond with nothing in between.
         marks.push(rect(105, MarkingClass::StopLine, 0.5, 3.0, 7.8, 8.2));
         marks.push(rect(106, MarkingClass::DashedLine, 1.0, 2.5, 9.95, 10.1));
-        let p = plan(&marks, 1);
+        // With one missing stripe allowed, the fragment at 10 continues the crossing and
+        // the worn-away stripe at 9 is filled.
+        let one = plan(&marks, 1);
+        assert!(one.reshape.iter().any(|r| r.0 == 106));
+        assert_eq!(one.fill.len(), 1);
+        let c = one.fill[0].0.ring.iter().fold(0.0, |a, q| a + q[1] / 4.0);
+        assert!((c - 9.0).abs() < 1e-6, "filled at y = 9, got {c}");
+        let p = plan(&marks, 0);
         let beyond = p
             .reshape
             .iter()
