@@ -311,8 +311,7 @@ fn link(
     let n = segs.len();
     let mut order: Vec<usize> = (0..n).collect();
     order.sort_by(|&a, &b| segs[a].s0.total_cmp(&segs[b].s0).then(a.cmp(&b)));
-    let mut best_next: Vec<Option<(f64, usize)>> = vec![None; n];
-    let mut best_prev: Vec<Option<(f64, usize)>> = vec![None; n];
+    let mut cands: Vec<(f64, usize, usize)> = Vec::new();
     let max_tan = p.max_angle_deg.to_radians();
     for (oi, &a) in order.iter().enumerate() {
         let sa = &segs[a];
@@ -374,23 +373,45 @@ fn link(
             if sa.width.min(sb.width) + 0.05 < p.min_width_similarity * (sa.width.max(sb.width) + 0.05) {
                 continue;
             }
-            let cost = dev / tol.max(1e-6) + 0.5 * g / p.max_gap_m.max(1e-6);
-            if best_next[a].is_none_or(|(c, _)| cost < c) {
+            // The mismatch that ranks candidates is the smaller of the extrapolated and the
+            // flat one, for every candidate alike: otherwise a piece 30 m on across an
+            // unseen gap (ranked by its flat offset) beats the next piece 12 m on (ranked
+            // by extrapolating short pieces' noisy slopes) and the line is cut between them.
+            let cost = dev.min(flat) / tol.max(1e-6) + 0.5 * g / p.max_gap_m.max(1e-6);
+            cands.push((cost, a, b));
+        }
+    }
+    // Mutual best matches, repeated among the ends still free: a piece whose best match
+    // was taken by a better-placed one links to its next best when that one also prefers
+    // it among the free ends (a far line's fragments otherwise leave gaps in the chain).
+    let mut next: Vec<Option<usize>> = vec![None; n];
+    let mut has_prev = vec![false; n];
+    loop {
+        let mut best_next: Vec<Option<(f64, usize)>> = vec![None; n];
+        let mut best_prev: Vec<Option<(f64, usize)>> = vec![None; n];
+        for &(cost, a, b) in &cands {
+            if next[a].is_some() || has_prev[b] {
+                continue;
+            }
+            if best_next[a].is_none_or(|(c, x)| cost < c || (cost == c && b < x)) {
                 best_next[a] = Some((cost, b));
             }
-            if best_prev[b].is_none_or(|(c, _)| cost < c) {
+            if best_prev[b].is_none_or(|(c, x)| cost < c || (cost == c && a < x)) {
                 best_prev[b] = Some((cost, a));
             }
         }
-    }
-    let mut next: Vec<Option<usize>> = vec![None; n];
-    let mut has_prev = vec![false; n];
-    for (a, bn) in best_next.iter().enumerate() {
-        if let Some((_, b)) = *bn
-            && best_prev[b].map(|x| x.1) == Some(a)
-        {
-            next[a] = Some(b);
-            has_prev[b] = true;
+        let mut linked = false;
+        for (a, bn) in best_next.iter().enumerate() {
+            if let Some((_, b)) = *bn
+                && best_prev[b].map(|x| x.1) == Some(a)
+            {
+                next[a] = Some(b);
+                has_prev[b] = true;
+                linked = true;
+            }
+        }
+        if !linked {
+            break;
         }
     }
     let mut chains = Vec::new();
@@ -1033,6 +1054,51 @@ mod tests {
         assert_eq!(link(&blob, &p, &[], &none), vec![vec![0], vec![1]]);
         let level = [seg(0.0, 2.0, 5.36, 0.0, 0.47), seg(39.0, 41.8, 5.4, 0.0, 0.25)];
         assert_eq!(link(&level, &p, &[], &none), vec![vec![0, 1]]);
+    }
+
+    /// Mutual best matches repeat among the ends left free: C is the best next piece of
+    /// both A and D and takes D (a better fit); A then links to its next best, B, which
+    /// has no better free predecessor. (One round of mutual best matches left A and B
+    /// apart.)
+    #[test]
+    fn ends_left_free_link_to_their_next_best_match() {
+        let seg = |s0: f64, s1: f64, o: f64| Seg {
+            members: vec![],
+            s0,
+            s1,
+            o0: o,
+            o1: o,
+            slope0: 0.0,
+            slope1: 0.0,
+            width: 0.15,
+        };
+        let p = Params::default();
+        let none = |_: [f64; 2], _: [f64; 2]| false;
+        let segs = [
+            seg(0.0, 10.0, 3.6),
+            seg(5.0, 13.5, 3.52),
+            seg(14.0, 30.0, 3.5),
+            seg(20.0, 30.0, 3.8),
+        ];
+        let mut chains = link(&segs, &p, &[], &none);
+        chains.sort();
+        assert_eq!(chains, vec![vec![0, 3], vec![1, 2]]);
+        // A far line's pieces, 26 m from the trajectory, across gaps the scanner did not
+        // see: the 12 m gap to the next piece is linked although a fragment 32 m on
+        // matches the first piece's offset better.
+        let far = |s0: f64, s1: f64, o: f64, slope: f64, width: f64| Seg {
+            slope0: slope,
+            slope1: slope,
+            width,
+            ..seg(s0, s1, o)
+        };
+        let segs = [
+            far(118.5, 198.4, 26.58, 0.0112, 0.15),
+            far(210.4, 214.6, 26.43, 0.0103, 0.18),
+            far(230.7, 231.9, 26.40, 0.0603, 0.09),
+        ];
+        let unseen = |_: [f64; 2], _: [f64; 2]| true;
+        assert_eq!(link(&segs, &p, &[], &unseen), vec![vec![0, 1, 2]]);
     }
 
     /// Two 1 m solid fragments 30 m apart cover 6 % of the line they would span: no lane
