@@ -231,6 +231,11 @@ const SLOPE_NOISE_M: f64 = 0.05;
 /// error in the course.
 const COURSE_HALF_WIDTH_M: f64 = 0.05;
 
+/// Jitter (share of the period) of the centres of partly seen dashes in the period test.
+const PERIOD_JITTER: f64 = 0.15;
+/// ... where most of the gaps were seen bare (the fragments' gaps are real).
+const BARE_PERIOD_JITTER: f64 = 0.25;
+
 /// A painted run longer than this many times the median run of its group is no dash.
 const NOT_A_DASH_FACTOR: f64 = 4.0;
 
@@ -823,17 +828,20 @@ fn regimes(
         // (jitter ≤ half a dash: a sixth of a GB 2/4 m period), or twice it where one dash is
         // missing; a run longer than most of a period is no dash. A solid line sampled in
         // fragments has no such period.
-        let regular_period = lens.len() >= 3 && {
-            let centres: Vec<f64> = runs[i..=j].iter().map(|r| 0.5 * (r.0 + r.1)).collect();
-            let mut spacings: Vec<f64> = centres.windows(2).map(|w| w[1] - w[0]).collect();
-            let period = geom::median(&mut spacings);
-            let on_period = |x: f64| {
-                let k = (x / period).round();
-                (1.0..=2.0).contains(&k) && (x - k * period).abs() <= 0.15 * period
-            };
-            spacings.iter().filter(|&&x| on_period(x)).count() as f64 >= 0.75 * spacings.len() as f64
-                && lens.iter().all(|&l| l <= 0.8 * period)
+        let regular_period_within = |jitter: f64| {
+            lens.len() >= 3 && {
+                let centres: Vec<f64> = runs[i..=j].iter().map(|r| 0.5 * (r.0 + r.1)).collect();
+                let mut spacings: Vec<f64> = centres.windows(2).map(|w| w[1] - w[0]).collect();
+                let period = geom::median(&mut spacings);
+                let on_period = |x: f64| {
+                    let k = (x / period).round();
+                    (1.0..=2.0).contains(&k) && (x - k * period).abs() <= jitter * period
+                };
+                spacings.iter().filter(|&&x| on_period(x)).count() as f64 >= 0.75 * spacings.len() as f64
+                    && lens.iter().all(|&l| l <= 0.8 * period)
+            }
         };
+        let regular_period = regular_period_within(PERIOD_JITTER);
         let beside_demoted = (i > 0 && demoted[i - 1]) || (j + 1 < runs.len() && demoted[j + 1]);
         let min_dashes = if beside_demoted {
             2 * p.min_dashes
@@ -858,8 +866,13 @@ fn regimes(
         // At least a third of them seen bare, or the group is no dashed stretch. (Bare
         // gaps alone do not make dashes: worn solid lines have them too.)
         let bare_some = || bare_count().is_none_or(|b| b >= 1 && 3 * b >= j - i);
+        // Where most gaps were seen bare, dashes seen in part (a 6 m dash read as 1-4 m at
+        // long range) may shift their centres by up to a quarter period.
+        let mostly_bare = || bare_count().is_some_and(|b| b >= 2 && 2 * b >= j - i);
         if lens.len() >= min_dashes
-            && (regular && regular_gaps || regular_period)
+            && (regular && regular_gaps
+                || regular_period
+                || mostly_bare() && regular_period_within(BARE_PERIOD_JITTER))
             && paint <= 0.7
             && bare_some()
         {
@@ -1417,6 +1430,32 @@ mod tests {
         assert_eq!(
             class(Some(&test_seen_except(&t, 3.5, |_| true))),
             LaneLineClass::SolidLine
+        );
+    }
+
+    /// A far GB 6/9 m dashed line read in part (0.8-3.8 m of each dash, so the centres
+    /// jitter by up to a quarter of the 15 m period): dashed where its gaps were seen bare,
+    /// solid without that evidence (the same fragments of a sparse solid line).
+    #[test]
+    fn partly_seen_dashes_with_bare_gaps_keep_their_period() {
+        let t = traj();
+        let p = Params::default();
+        let pieces = dash_pieces(&[
+            (12.4, 16.0),
+            (28.5, 29.8),
+            (47.2, 48.0),
+            (59.8, 63.6),
+            (72.7, 75.1),
+        ]);
+        let class = |seen: Option<&crate::pipeline::observed::Observed>| {
+            let lanes = grow_with_barriers(&pieces, &t, &p, &[], seen.map(|s| s.lookup()).as_ref());
+            assert_eq!(lanes.lines.len(), 1);
+            lanes.lines[0].class
+        };
+        assert_eq!(class(None), LaneLineClass::SolidLine);
+        assert_eq!(
+            class(Some(&test_seen_except(&t, 3.5, |_| false))),
+            LaneLineClass::DashedLine
         );
     }
 
