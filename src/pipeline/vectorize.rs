@@ -744,6 +744,86 @@ fn join_stop_lines(mut pieces: Vec<Piece>, refl: &RefLine) -> Vec<Piece> {
     without(pieces, removed)
 }
 
+/// Longest gap (m) on either side of a bar across the road between it and the pieces of a
+/// line that runs on through it, for [`stop_lines_crossed_by_lines`]: a dash gap (GB 9 m,
+/// MUTCD 30 ft) plus a metre.
+const CROSSED_BAR_GAP_M: f64 = 10.0;
+/// Largest offset difference (m) between the pieces before and after the bar.
+const CROSSED_BAR_OFFSET_M: f64 = 0.2;
+/// The line must cross the bar this far (m) inside its ends: a stop line ends at the
+/// centre line or edge line that continues beside it.
+const CROSSED_BAR_INSET_M: f64 = 0.3;
+
+/// A "stop line" across the road that a lane line runs on through is no stop line: lanes
+/// end at a stop line, they do not continue through it. An expansion joint, a cable trench
+/// or a bright seam across a ramp looks like a stop line and would otherwise cut the lane
+/// lines it crosses (stop lines are barriers to lane-line growth). Such a bar — across
+/// the road, with a solid or dashed piece ending at most [`CROSSED_BAR_GAP_M`] before it
+/// and another starting at most as far after it, at the same offset (±
+/// [`CROSSED_BAR_OFFSET_M`]) and inside the bar's ends by [`CROSSED_BAR_INSET_M`], with no
+/// crosswalk stripe within that distance — becomes `unknown`.
+fn stop_lines_crossed_by_lines(pieces: &mut [Piece], refl: &RefLine) {
+    // (start s, start o, end s, end o) of the line pieces.
+    let ends: Vec<[f64; 4]> = pieces
+        .iter()
+        .filter(|p| {
+            matches!(
+                p.marking.class,
+                MarkingClass::SolidLine | MarkingClass::DashedLine
+            )
+        })
+        .filter_map(|p| {
+            let mut so: Vec<[f64; 2]> = p.centerline.as_ref()?.iter().map(|&v| refl.locate(v)).collect();
+            so.sort_by(|a, b| a[0].total_cmp(&b[0]));
+            let (a, b) = (so.first()?, so.last()?);
+            Some([a[0], a[1], b[0], b[1]])
+        })
+        .collect();
+    // (s, o) box of an outline.
+    let bbox = |outline: &[[f64; 2]]| {
+        outline.iter().map(|&v| refl.locate(v)).fold(
+            [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY],
+            |a, q| [a[0].min(q[0]), a[1].max(q[0]), a[2].min(q[1]), a[3].max(q[1])],
+        )
+    };
+    let crossings: Vec<[f64; 4]> = pieces
+        .iter()
+        .filter(|p| p.marking.class == MarkingClass::Crosswalk)
+        .map(|p| bbox(&p.marking.outline))
+        .collect();
+    for p in pieces.iter_mut() {
+        if p.marking.class != MarkingClass::StopLine || p.marking.outline.len() < 4 {
+            continue;
+        }
+        let [s0, s1, o0, o1] = bbox(&p.marking.outline);
+        if o1 - o0 < 2.0 * (s1 - s0) {
+            continue;
+        }
+        // A crosswalk next to it: a stop line where it belongs, and the stripes beyond it
+        // (or their worn pieces read as dashes) are no line running on.
+        let near_crossing = crossings.iter().any(|c| {
+            c[0] <= s1 + CROSSED_BAR_GAP_M && c[1] >= s0 - CROSSED_BAR_GAP_M && c[2] <= o1 && c[3] >= o0
+        });
+        if near_crossing {
+            continue;
+        }
+        let inside = |o: f64| o >= o0 + CROSSED_BAR_INSET_M && o <= o1 - CROSSED_BAR_INSET_M;
+        let crossed = ends.iter().any(|a| {
+            a[2] <= s0 + 0.3
+                && a[2] >= s0 - CROSSED_BAR_GAP_M
+                && inside(a[3])
+                && ends.iter().any(|b| {
+                    b[0] >= s1 - 0.3
+                        && b[0] <= s1 + CROSSED_BAR_GAP_M
+                        && (b[1] - a[3]).abs() <= CROSSED_BAR_OFFSET_M
+                })
+        });
+        if crossed {
+            p.marking.class = MarkingClass::Unknown;
+        }
+    }
+}
+
 /// Largest offset difference (m) between a bar along the road and the line piece it
 /// continues, and the largest gap (m) between them, for [`lines_not_stop_lines`].
 const ALONG_BAR_OFFSET_M: f64 = 0.2;
@@ -860,6 +940,7 @@ pub fn assemble(
     };
     let mut pieces = pieces;
     lines_not_stop_lines(&mut pieces, &refl);
+    stop_lines_crossed_by_lines(&mut pieces, &refl);
     let pieces = if params.join_stop_lines {
         join_stop_lines(pieces, &refl)
     } else {
@@ -1189,6 +1270,51 @@ mod tests {
         };
         let (marks, _) = assemble(pieces(), &traj, &off, None);
         assert_eq!(count(&marks, MarkingClass::DashedLine), 7);
+    }
+
+    /// A bar across the road (0.2 m × 7 m) that a dashed line runs on through (dashes ending
+    /// 3 m before it and starting 4 m after it at its offset) is no stop line; one where the
+    /// line ends, or with a crosswalk beside it, stays a stop line.
+    #[test]
+    fn bars_that_lane_lines_run_through_are_no_stop_lines() {
+        let traj = crate::pipeline::types::test_straight_trajectory(100, -20.0);
+        let refl = RefLine::new(&traj);
+        let rect = |class: MarkingClass, x0: f64, x1: f64, y0: f64, y1: f64| Piece {
+            marking: Marking {
+                class,
+                outline: vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]],
+                ..solid(0.0, 1.0).marking
+            },
+            centerline: None,
+            undersampled: None,
+        };
+        let dash = |x0: f64| {
+            let mut p = solid(x0, x0 + 2.0);
+            p.marking.class = MarkingClass::DashedLine;
+            p.marking.outline.iter_mut().for_each(|q| q[1] += 1.75);
+            p.centerline.iter_mut().flatten().for_each(|q| q[1] += 1.75);
+            p
+        };
+        let bar = || rect(MarkingClass::StopLine, 30.0, 30.2, -1.75, 5.25);
+        let class_of_bar = |mut pieces: Vec<Piece>| {
+            stop_lines_crossed_by_lines(&mut pieces, &refl);
+            pieces[0].marking.class
+        };
+        assert_eq!(
+            class_of_bar(vec![bar(), dash(25.0), dash(34.2)]),
+            MarkingClass::Unknown
+        );
+        assert_eq!(class_of_bar(vec![bar(), dash(25.0)]), MarkingClass::StopLine);
+        // Beyond 10 m on: not the same line running on.
+        assert_eq!(
+            class_of_bar(vec![bar(), dash(25.0), dash(41.0)]),
+            MarkingClass::StopLine
+        );
+        let stripe = rect(MarkingClass::Crosswalk, 32.0, 36.0, 2.0, 2.45);
+        assert_eq!(
+            class_of_bar(vec![bar(), dash(25.0), dash(34.2), stripe]),
+            MarkingClass::StopLine
+        );
     }
 
     /// A 45 m gap of a solid lane line is bridged when the scanner did not see its course,
