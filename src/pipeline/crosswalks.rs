@@ -391,22 +391,19 @@ fn regularise_group(
             else {
                 continue;
             };
-            if open && !slots[k].frags.is_empty() {
-                for &e in &empty {
-                    slots[e].edge = 0;
+            if !open {
+                for &i in &slots[k].frags {
+                    taken[i] = false;
                 }
-                empty.clear();
-                continue;
-            }
-            if open && slots[k].frags.is_empty() {
+                slots[k].frags.clear();
+            } else if slots[k].frags.is_empty() {
                 empty.push(k);
                 open = empty.len() <= fill_max;
-                continue;
+            } else {
+                for e in empty.drain(..) {
+                    slots[e].edge = 0;
+                }
             }
-            for &i in &slots[k].frags {
-                taken[i] = false;
-            }
-            slots[k].frags.clear();
         }
     }
     // 5. Edits.

@@ -796,6 +796,17 @@ mod tests {
     use super::*;
 
     /// One scan row crossing a bar: `n` points 0.05 m apart from `start` along `dir`.
+    /// The fragments' points in one list, and each fragment's indices into it.
+    fn pooled(frags: Vec<Vec<[f64; 2]>>) -> (Vec<[f64; 2]>, Vec<Vec<usize>>) {
+        let mut xy = Vec::new();
+        let mut comps = Vec::new();
+        for pts in frags {
+            comps.push((xy.len()..xy.len() + pts.len()).collect::<Vec<usize>>());
+            xy.extend(pts);
+        }
+        (xy, comps)
+    }
+
     fn row(start: [f64; 2], dir: [f64; 2], n: usize) -> Vec<[f64; 2]> {
         (0..n)
             .map(|k| {
@@ -812,20 +823,16 @@ mod tests {
     /// and a long row (a line, not a fragment) join nothing.
     #[test]
     fn stacked_row_fragments_join_and_collinear_ones_do_not() {
-        let mut xy = Vec::new();
-        let mut comps = Vec::new();
-        let mut add = |pts: Vec<[f64; 2]>| {
-            comps.push((xy.len()..xy.len() + pts.len()).collect::<Vec<usize>>());
-            xy.extend(pts);
-        };
+        let mut frags = Vec::new();
         for r in 0..5 {
             let y = 0.45 * r as f64;
-            add(row([0.0, y], [1.0, 0.0], 9));
-            add(row([1.05, y], [1.0, 0.0], 9));
+            frags.push(row([0.0, y], [1.0, 0.0], 9));
+            frags.push(row([1.05, y], [1.0, 0.0], 9));
         }
         let d = [30f64.to_radians().cos(), 30f64.to_radians().sin()];
-        add(row([0.0, 2.7], d, 9));
-        add(row([-3.0, 1.0], [1.0, 0.0], 60));
+        frags.push(row([0.0, 2.7], d, 9));
+        frags.push(row([-3.0, 1.0], [1.0, 0.0], 60));
+        let (xy, comps) = pooled(frags);
         let n = comps.len();
         let joined: Vec<Vec<usize>> = join_row_fragments(&xy, &comps, 0.6)
             .into_iter()
@@ -845,24 +852,20 @@ mod tests {
     /// next stripe 1 m further along the rows stays apart.
     #[test]
     fn two_head_row_stacks_join_into_their_stripe() {
-        let mut xy = Vec::new();
-        let mut comps = Vec::new();
-        let mut add = |pts: Vec<[f64; 2]>| {
-            comps.push((xy.len()..xy.len() + pts.len()).collect::<Vec<usize>>());
-            xy.extend(pts);
-        };
         let dir = |deg: f64| [deg.to_radians().cos(), deg.to_radians().sin()];
+        let mut frags = Vec::new();
         for stripe in 0..2 {
             let x0 = stripe as f64 * 1.0;
             for (r, y) in [0.0, 0.45, 0.9, 1.8, 2.25, 2.7].into_iter().enumerate() {
                 let deg = if r % 2 == 0 { 15.0 } else { -12.0 };
-                add(row([x0, y], dir(deg), 9));
+                frags.push(row([x0, y], dir(deg), 9));
             }
             // Two crossing rows at 1.3-1.45 m make one X-shaped fragment.
             let mut cross = row([x0, 1.3], dir(15.0), 9);
             cross.extend(row([x0, 1.45], dir(-15.0), 9));
-            add(cross);
+            frags.push(cross);
         }
+        let (xy, comps) = pooled(frags);
         let joined = join_row_fragments(&xy, &comps, 0.6);
         assert_eq!(joined.len(), 2, "{joined:?}");
         assert_eq!(joined[0], (0..7).collect::<Vec<_>>());

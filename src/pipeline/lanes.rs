@@ -708,11 +708,10 @@ fn merge_overlaps(items: Vec<Item>) -> Vec<Item> {
         if clash {
             continue;
         }
+        // `union` makes the smaller root the root.
         geom::union(&mut parent, ri, rj);
-        let root = geom::find_root(&mut parent, ri);
-        let other = if root == ri { rj } else { ri };
-        let moved = std::mem::take(&mut members[other]);
-        members[root].extend(moved);
+        let moved = std::mem::take(&mut members[ri.max(rj)]);
+        members[ri.min(rj)].extend(moved);
     }
     if !any {
         return items;
@@ -852,16 +851,20 @@ fn regimes(
         // long range the scan columns drift on and off a line, and a solid line's
         // fragments have the lengths and spacing of dashes, but its gaps never show
         // asphalt on its course (their points, where there are any, are paint).
+        // Looked up once, and only when the other tests pass (each gap is a course lookup).
+        let bare_cache = std::cell::OnceCell::new();
         let bare_count = || {
-            let gap_at = gap_at?;
-            let end = |k: usize| {
-                let last = &items[runs[k].2[runs[k].2.len() - 1]].so;
-                last[last.len() - 1]
-            };
-            let bare = (i..j)
-                .filter(|&k| gap_at(end(k), items[runs[k + 1].2[0]].so[0]) == Gap::SeenBare)
-                .count();
-            Some(bare)
+            *bare_cache.get_or_init(|| {
+                let gap_at = gap_at?;
+                let end = |k: usize| {
+                    let last = &items[runs[k].2[runs[k].2.len() - 1]].so;
+                    last[last.len() - 1]
+                };
+                let bare = (i..j)
+                    .filter(|&k| gap_at(end(k), items[runs[k + 1].2[0]].so[0]) == Gap::SeenBare)
+                    .count();
+                Some(bare)
+            })
         };
         // At least a third of them seen bare, or the group is no dashed stretch. (Bare
         // gaps alone do not make dashes: worn solid lines have them too.)
@@ -1017,6 +1020,20 @@ mod tests {
         test_straight_trajectory(100, -20.0)
     }
 
+    /// A segment from s0 to s1 starting at offset o0 with one slope at both ends.
+    fn seg(s0: f64, s1: f64, o0: f64, slope: f64, width: f64) -> Seg {
+        Seg {
+            members: vec![],
+            s0,
+            s1,
+            o0,
+            o1: o0 + slope * (s1 - s0),
+            slope0: slope,
+            slope1: slope,
+            width,
+        }
+    }
+
     /// Dash-class pieces on the spans `(x0, x1)`, keyed by position.
     fn dash_pieces(spans: &[(f64, f64)]) -> Vec<LanePiece> {
         spans
@@ -1042,16 +1059,6 @@ mod tests {
     /// a piece 1.75 m beside it 37 m on. At the same offset the blob still links.
     #[test]
     fn short_wide_blobs_do_not_steer_links_sideways() {
-        let seg = |s0: f64, s1: f64, o0: f64, slope: f64, width: f64| Seg {
-            members: vec![],
-            s0,
-            s1,
-            o0,
-            o1: o0 + slope * (s1 - s0),
-            slope0: slope,
-            slope1: slope,
-            width,
-        };
         let p = Params::default();
         let none = |_: [f64; 2], _: [f64; 2]| false;
         let k = 0.047;
@@ -1075,35 +1082,24 @@ mod tests {
     /// apart.)
     #[test]
     fn ends_left_free_link_to_their_next_best_match() {
-        let seg = |s0: f64, s1: f64, o: f64| Seg {
-            members: vec![],
-            s0,
-            s1,
-            o0: o,
-            o1: o,
-            slope0: 0.0,
-            slope1: 0.0,
-            width: 0.15,
-        };
+        let level = |s0: f64, s1: f64, o: f64| seg(s0, s1, o, 0.0, 0.15);
         let p = Params::default();
         let none = |_: [f64; 2], _: [f64; 2]| false;
         let segs = [
-            seg(0.0, 10.0, 3.6),
-            seg(5.0, 13.5, 3.52),
-            seg(14.0, 30.0, 3.5),
-            seg(20.0, 30.0, 3.8),
+            level(0.0, 10.0, 3.6),
+            level(5.0, 13.5, 3.52),
+            level(14.0, 30.0, 3.5),
+            level(20.0, 30.0, 3.8),
         ];
         let mut chains = link(&segs, &p, &[], &none);
         chains.sort();
         assert_eq!(chains, vec![vec![0, 3], vec![1, 2]]);
         // A far line's pieces, 26 m from the trajectory, across gaps the scanner did not
         // see: the 12 m gap to the next piece is linked although a fragment 32 m on
-        // matches the first piece's offset better.
+        // matches the first piece's offset better. (Ends at the same offset, slopes apart.)
         let far = |s0: f64, s1: f64, o: f64, slope: f64, width: f64| Seg {
-            slope0: slope,
-            slope1: slope,
-            width,
-            ..seg(s0, s1, o)
+            o1: o,
+            ..seg(s0, s1, o, slope, width)
         };
         let segs = [
             far(118.5, 198.4, 26.58, 0.0112, 0.15),
@@ -1408,6 +1404,18 @@ mod tests {
         );
     }
 
+    /// The class of the one lane line grown from `pieces` with what the scanner saw.
+    fn one_line_class(
+        pieces: &[LanePiece],
+        t: &Trajectory,
+        p: &Params,
+        seen: Option<&crate::pipeline::observed::Observed>,
+    ) -> LaneLineClass {
+        let lanes = grow_with_barriers(pieces, t, p, &[], seen.map(|s| s.lookup()).as_ref());
+        assert_eq!(lanes.lines.len(), 1);
+        lanes.lines[0].class
+    }
+
     /// 1.5 m fragments every 6 m (a far line's scan columns drifting on and off it): a
     /// dashed line when its gaps show bare asphalt, a solid line when their course holds
     /// no dark point (the points there are paint), and dashed without any record.
@@ -1417,11 +1425,8 @@ mod tests {
         let p = Params::default();
         let spans: Vec<(f64, f64)> = (0..12).map(|i| (6.0 * i as f64, 6.0 * i as f64 + 1.5)).collect();
         let pieces = dash_pieces(&spans);
-        let class = |seen: Option<&crate::pipeline::observed::Observed>| {
-            let lanes = grow_with_barriers(&pieces, &t, &p, &[], seen.map(|s| s.lookup()).as_ref());
-            assert_eq!(lanes.lines.len(), 1);
-            lanes.lines[0].class
-        };
+        let class =
+            |seen: Option<&crate::pipeline::observed::Observed>| one_line_class(&pieces, &t, &p, seen);
         assert_eq!(class(None), LaneLineClass::DashedLine);
         assert_eq!(
             class(Some(&test_seen_except(&t, 3.5, |_| false))),
@@ -1447,11 +1452,8 @@ mod tests {
             (59.8, 63.6),
             (72.7, 75.1),
         ]);
-        let class = |seen: Option<&crate::pipeline::observed::Observed>| {
-            let lanes = grow_with_barriers(&pieces, &t, &p, &[], seen.map(|s| s.lookup()).as_ref());
-            assert_eq!(lanes.lines.len(), 1);
-            lanes.lines[0].class
-        };
+        let class =
+            |seen: Option<&crate::pipeline::observed::Observed>| one_line_class(&pieces, &t, &p, seen);
         assert_eq!(class(None), LaneLineClass::SolidLine);
         assert_eq!(
             class(Some(&test_seen_except(&t, 3.5, |_| false))),

@@ -744,6 +744,34 @@ fn join_stop_lines(mut pieces: Vec<Piece>, refl: &RefLine) -> Vec<Piece> {
     without(pieces, removed)
 }
 
+/// (s, o) samples of the solid and dashed pieces' centrelines, sorted by s, with the
+/// pieces' indices.
+fn line_samples(pieces: &[Piece], refl: &RefLine) -> Vec<(usize, Vec<[f64; 2]>)> {
+    pieces
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| {
+            matches!(
+                p.marking.class,
+                MarkingClass::SolidLine | MarkingClass::DashedLine
+            )
+        })
+        .filter_map(|(k, p)| {
+            let mut so: Vec<[f64; 2]> = p.centerline.as_ref()?.iter().map(|&v| refl.locate(v)).collect();
+            so.sort_by(|a, b| a[0].total_cmp(&b[0]));
+            (so.len() >= 2).then_some((k, so))
+        })
+        .collect()
+}
+
+/// Extent of an outline in the trajectory frame: [s0, s1, o0, o1].
+fn so_box(outline: &[[f64; 2]], refl: &RefLine) -> [f64; 4] {
+    outline.iter().map(|&v| refl.locate(v)).fold(
+        [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY],
+        |a, q| [a[0].min(q[0]), a[1].max(q[0]), a[2].min(q[1]), a[3].max(q[1])],
+    )
+}
+
 /// Longest gap (m) on either side of a bar across the road between it and the pieces of a
 /// line that runs on through it, for [`stop_lines_crossed_by_lines`]: a dash gap (GB 9 m,
 /// MUTCD 30 ft) plus a metre.
@@ -764,38 +792,23 @@ const CROSSED_BAR_INSET_M: f64 = 0.3;
 /// crosswalk stripe within that distance — becomes `unknown`.
 fn stop_lines_crossed_by_lines(pieces: &mut [Piece], refl: &RefLine) {
     // (start s, start o, end s, end o) of the line pieces.
-    let ends: Vec<[f64; 4]> = pieces
+    let ends: Vec<[f64; 4]> = line_samples(pieces, refl)
         .iter()
-        .filter(|p| {
-            matches!(
-                p.marking.class,
-                MarkingClass::SolidLine | MarkingClass::DashedLine
-            )
-        })
-        .filter_map(|p| {
-            let mut so: Vec<[f64; 2]> = p.centerline.as_ref()?.iter().map(|&v| refl.locate(v)).collect();
-            so.sort_by(|a, b| a[0].total_cmp(&b[0]));
-            let (a, b) = (so.first()?, so.last()?);
-            Some([a[0], a[1], b[0], b[1]])
+        .map(|(_, so)| {
+            let (a, b) = (so[0], so[so.len() - 1]);
+            [a[0], a[1], b[0], b[1]]
         })
         .collect();
-    // (s, o) box of an outline.
-    let bbox = |outline: &[[f64; 2]]| {
-        outline.iter().map(|&v| refl.locate(v)).fold(
-            [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY],
-            |a, q| [a[0].min(q[0]), a[1].max(q[0]), a[2].min(q[1]), a[3].max(q[1])],
-        )
-    };
     let crossings: Vec<[f64; 4]> = pieces
         .iter()
         .filter(|p| p.marking.class == MarkingClass::Crosswalk)
-        .map(|p| bbox(&p.marking.outline))
+        .map(|p| so_box(&p.marking.outline, refl))
         .collect();
     for p in pieces.iter_mut() {
         if p.marking.class != MarkingClass::StopLine || p.marking.outline.len() < 4 {
             continue;
         }
-        let [s0, s1, o0, o1] = bbox(&p.marking.outline);
+        let [s0, s1, o0, o1] = so_box(&p.marking.outline, refl);
         if o1 - o0 < 2.0 * (s1 - s0) {
             continue;
         }
@@ -837,22 +850,7 @@ const ALONG_BAR_GAP_M: f64 = 15.0;
 /// is not at that line's offset. Such bars become solid pieces with their axis as
 /// centreline, so lane-line growth links across them instead of stopping at a barrier.
 fn lines_not_stop_lines(pieces: &mut [Piece], refl: &RefLine) {
-    // (s, o) samples of the line pieces, sorted by s.
-    let lines: Vec<(usize, Vec<[f64; 2]>)> = pieces
-        .iter()
-        .enumerate()
-        .filter(|(_, p)| {
-            matches!(
-                p.marking.class,
-                MarkingClass::SolidLine | MarkingClass::DashedLine
-            )
-        })
-        .filter_map(|(k, p)| {
-            let mut so: Vec<[f64; 2]> = p.centerline.as_ref()?.iter().map(|&v| refl.locate(v)).collect();
-            so.sort_by(|a, b| a[0].total_cmp(&b[0]));
-            (so.len() >= 2).then_some((k, so))
-        })
-        .collect();
+    let lines = line_samples(pieces, refl);
     // Mean offset of the samples within 3 m of one end.
     let end_offset = |so: &[[f64; 2]], at_end: bool| {
         let (lo, hi) = if at_end {
@@ -872,13 +870,7 @@ fn lines_not_stop_lines(pieces: &mut [Piece], refl: &RefLine) {
         if p.marking.class != MarkingClass::StopLine || p.marking.outline.len() < 4 {
             continue;
         }
-        let so: Vec<[f64; 2]> = p.marking.outline.iter().map(|&v| refl.locate(v)).collect();
-        let (s0, s1) = so.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, q| {
-            (a.0.min(q[0]), a.1.max(q[0]))
-        });
-        let (o0, o1) = so.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, q| {
-            (a.0.min(q[1]), a.1.max(q[1]))
-        });
+        let [s0, s1, o0, o1] = so_box(&p.marking.outline, refl);
         // Along the road: its extent along is ≥ 3× its extent across (≲ 20°).
         if s1 - s0 < 3.0 * (o1 - o0) {
             continue;
@@ -975,10 +967,12 @@ pub fn assemble(
         for &(k, _) in &lanes.classes {
             in_lane[k] = true;
         }
-        for (p, _) in pieces.iter_mut().zip(&in_lane).filter(|(_, inl)| !**inl) {
-            if p.marking.class == MarkingClass::DashedLine {
-                p.marking.class = MarkingClass::Unknown;
-            }
+        for (p, _) in pieces
+            .iter_mut()
+            .zip(in_lane)
+            .filter(|(p, inl)| !inl && p.marking.class == MarkingClass::DashedLine)
+        {
+            p.marking.class = MarkingClass::Unknown;
         }
     }
     if params.widen_undersampled {
@@ -1145,6 +1139,33 @@ mod tests {
         }
     }
 
+    /// `p` moved by `y` across the road.
+    fn shifted(mut p: Piece, y: f64) -> Piece {
+        p.marking.outline.iter_mut().for_each(|q| q[1] += y);
+        p.centerline.iter_mut().flatten().for_each(|q| q[1] += y);
+        p
+    }
+
+    /// A 2 m dash from `x0` at offset `y`.
+    fn dash(x0: f64, y: f64) -> Piece {
+        let mut p = shifted(solid(x0, x0 + 2.0), y);
+        p.marking.class = MarkingClass::DashedLine;
+        p
+    }
+
+    /// An axis-aligned rectangular mark without a centreline.
+    fn rect(class: MarkingClass, x0: f64, x1: f64, y0: f64, y1: f64) -> Piece {
+        Piece {
+            marking: Marking {
+                class,
+                outline: vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]],
+                ..solid(0.0, 1.0).marking
+            },
+            centerline: None,
+            undersampled: None,
+        }
+    }
+
     #[test]
     fn short_gaps_of_a_solid_line_are_bridged_along_it_and_long_ones_not() {
         let lane: Vec<[f64; 2]> = (0..=30).map(|i| [i as f64, 0.0]).collect();
@@ -1202,22 +1223,9 @@ mod tests {
     fn bars_along_the_road_that_continue_a_line_are_line_pieces() {
         let traj = crate::pipeline::types::test_straight_trajectory(100, -20.0);
         let refl = RefLine::new(&traj);
-        let bar = |x0: f64, x1: f64, y0: f64, y1: f64| Piece {
-            marking: Marking {
-                class: MarkingClass::StopLine,
-                outline: vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]],
-                ..solid(0.0, 1.0).marking
-            },
-            centerline: None,
-            undersampled: None,
-        };
-        let at = |mut p: Piece, y: f64| {
-            p.marking.outline.iter_mut().for_each(|q| q[1] += y);
-            p.centerline.iter_mut().flatten().for_each(|q| q[1] += y);
-            p
-        };
+        let bar = |x0: f64, x1: f64, y0: f64, y1: f64| rect(MarkingClass::StopLine, x0, x1, y0, y1);
         let mut pieces = vec![
-            at(solid(0.0, 10.0), 26.5),
+            shifted(solid(0.0, 10.0), 26.5),
             bar(14.0, 19.0, 26.35, 26.65),
             bar(14.0, 19.0, 27.35, 27.65),
             bar(22.0, 22.3, 20.0, 26.0),
@@ -1247,13 +1255,6 @@ mod tests {
     #[test]
     fn dashes_outside_every_lane_line_are_unknown() {
         let traj = crate::pipeline::types::test_straight_trajectory(100, -20.0);
-        let dash = |x0: f64, y: f64| {
-            let mut p = solid(x0, x0 + 2.0);
-            p.marking.class = MarkingClass::DashedLine;
-            p.marking.outline.iter_mut().for_each(|q| q[1] += y);
-            p.centerline.iter_mut().flatten().for_each(|q| q[1] += y);
-            p
-        };
         let pieces = || {
             let mut v: Vec<Piece> = (0..6).map(|i| dash(6.0 * i as f64, 3.5)).collect();
             v.push(dash(14.0, 7.0));
@@ -1279,22 +1280,7 @@ mod tests {
     fn bars_that_lane_lines_run_through_are_no_stop_lines() {
         let traj = crate::pipeline::types::test_straight_trajectory(100, -20.0);
         let refl = RefLine::new(&traj);
-        let rect = |class: MarkingClass, x0: f64, x1: f64, y0: f64, y1: f64| Piece {
-            marking: Marking {
-                class,
-                outline: vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]],
-                ..solid(0.0, 1.0).marking
-            },
-            centerline: None,
-            undersampled: None,
-        };
-        let dash = |x0: f64| {
-            let mut p = solid(x0, x0 + 2.0);
-            p.marking.class = MarkingClass::DashedLine;
-            p.marking.outline.iter_mut().for_each(|q| q[1] += 1.75);
-            p.centerline.iter_mut().flatten().for_each(|q| q[1] += 1.75);
-            p
-        };
+        let dash = |x0: f64| dash(x0, 1.75);
         let bar = || rect(MarkingClass::StopLine, 30.0, 30.2, -1.75, 5.25);
         let class_of_bar = |mut pieces: Vec<Piece>| {
             stop_lines_crossed_by_lines(&mut pieces, &refl);
@@ -1322,11 +1308,7 @@ mod tests {
     #[test]
     fn solid_lines_are_bridged_across_gaps_the_scanner_did_not_see() {
         let traj = crate::pipeline::types::test_straight_trajectory(100, -20.0);
-        let at = |mut p: Piece| {
-            p.marking.outline.iter_mut().for_each(|q| q[1] += 3.5);
-            p.centerline.iter_mut().flatten().for_each(|q| q[1] += 3.5);
-            p
-        };
+        let at = |p: Piece| shifted(p, 3.5);
         let pieces = || vec![at(solid(0.0, 15.0)), at(solid(60.0, 78.0))];
         let p = Params::default();
         let unseen = crate::pipeline::observed::test_seen_except(&traj, 3.5, |x| (15.0..60.0).contains(&x));
