@@ -748,35 +748,106 @@ fn drop_feet(
             .filter_map(|j| taken.get(j).copied())
             .find(|l| !l.is_nan())
     };
-    // (s, u) of the face points, ordered by s.
-    let mut high: Vec<(f64, f64)> = Vec::new();
+    // (u cell, s, u) of the face points, ordered by cell then s: a query looks at the
+    // cells of u - margin ..= u + margin only, each by binary search on s (a face beside
+    // the road holds thousands of points per slice, all at the same s as the road).
+    let cell = |u: f64| (u / margin).floor() as i64;
+    let mut high: Vec<(i64, f64, f64)> = Vec::new();
     for (w, win) in windows.iter().enumerate() {
         let Some(lvl) = level(w) else { continue };
         high.extend(
             win.members
                 .iter()
                 .filter(|&&m| res[m].2 > lvl + thickness)
-                .map(|&m| (pts[m].2, res[m].1)),
+                .map(|&m| (cell(res[m].1), pts[m].2, res[m].1)),
         );
     }
     if high.is_empty() {
         return;
     }
-    high.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
+    high.sort_unstable_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)));
     let m2 = margin * margin;
     keep.retain(|&m| {
         let (s, u) = (pts[m].2, res[m].1);
-        let from = high.partition_point(|h| h.0 < s - margin);
-        !high[from..]
-            .iter()
-            .take_while(|h| h.0 <= s + margin)
-            .any(|h| (h.0 - s).powi(2) + (h.1 - u).powi(2) <= m2)
+        let c = cell(u);
+        !(c - 1..=c + 1).any(|b| {
+            let from = high.partition_point(|h| h.0 < b || (h.0 == b && h.1 < s - margin));
+            high[from..]
+                .iter()
+                .take_while(|h| h.0 == b && h.1 <= s + margin)
+                .any(|h| (h.1 - s).powi(2) + (h.2 - u).powi(2) <= m2)
+        })
     });
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The cell-bucketed search drops exactly the points a scan of every face point
+    /// would: random faces and road points, windows with and without a level.
+    #[test]
+    fn drop_feet_equals_the_exhaustive_search() {
+        let mut jit = crate::pipeline::geom::test_jitter(7);
+        let n = 3000;
+        // pts: (_, _, s, _); res: (_, u, r)
+        let pts: Vec<(usize, f64, f64, f64)> = (0..n).map(|i| (i, 0.0, 1.0 + jit(), 0.0)).collect();
+        let res: Vec<(usize, f64, f64)> = (0..n)
+            .map(|i| {
+                (
+                    i,
+                    3.0 * jit(),
+                    if i % 7 == 0 {
+                        0.5 + jit().abs()
+                    } else {
+                        0.01 * jit()
+                    },
+                )
+            })
+            .collect();
+        let windows: Vec<Window> = (0..6)
+            .map(|w| Window {
+                members: (0..n).filter(|i| i % 6 == w).collect(),
+                level: 0.0,
+                thick: 0.0,
+            })
+            .collect();
+        let taken = [0.0, f64::NAN, 0.0, 0.02, f64::NAN, f64::NAN];
+        let (thickness, margin) = (0.1, 0.05);
+        let mut keep: Vec<usize> = (0..n).filter(|i| i % 7 != 0).collect();
+        let before = keep.clone();
+        drop_feet(&mut keep, &windows, &taken, &res, &pts, thickness, margin);
+        // Exhaustive: the face points are those above their window's level (own, else a
+        // neighbour's), as drop_feet defines them.
+        let level = |w: usize| {
+            [w, w.wrapping_sub(1), w + 1]
+                .into_iter()
+                .filter_map(|j| taken.get(j).copied())
+                .find(|l| !l.is_nan())
+        };
+        let high: Vec<usize> = (0..6)
+            .filter_map(|w| level(w).map(|l| (w, l)))
+            .flat_map(|(w, l)| {
+                let res = &res;
+                windows[w]
+                    .members
+                    .iter()
+                    .copied()
+                    .filter(move |&m| res[m].2 > l + thickness)
+            })
+            .collect();
+        let expect: Vec<usize> = before
+            .into_iter()
+            .filter(|&m| {
+                !high.iter().any(|&h| {
+                    (pts[h].2 - pts[m].2).powi(2) + (res[h].1 - res[m].1).powi(2) <= margin * margin
+                })
+            })
+            .collect();
+        assert!(expect.len() > 100);
+        assert!(expect.len() < n * 6 / 7, "some road points must be feet");
+        assert_eq!(keep, expect);
+    }
 
     /// A 10 m stretch of road (u ∈ [-3, 4)) with a 2 % cross slope and a 3 % grade; a
     /// 0.15 m curb at u = 4 with sidewalk beyond; a 0.2 m high box on the road; a 0.2 m
