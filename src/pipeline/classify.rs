@@ -20,7 +20,9 @@
 //!    trajectory.
 //!    The line test works on curved pieces, where an MBR is a fat wrong rectangle.
 //!    Long clusters that fail it are a line with something attached (gore chevrons, a second
-//!    line): the lines are peeled off (`peel_lines`); pieces of a cluster no longer than
+//!    line): the lines are peeled off (`peel_lines`, up to six; the ragged edge of a peeled
+//!    line, points ≤ 0.1 m beyond its width, goes with no piece, so the stripes of a hatched
+//!    gore it chained come apart); pieces of a cluster no longer than
 //!    [`MAX_OBJECT_LENGTH_M`] keep it in `Candidate::whole`, for the learned classifier to
 //!    put back together when it is one object (a long arrow).
 //! 2. Broken lines are re-joined (Pan 2019): line pieces and short narrow fragments whose
@@ -553,7 +555,8 @@ fn peel_lines(
     let whole = (c.shape.length_m <= MAX_OBJECT_LENGTH_M).then(|| Arc::new(c.clone()));
     let mut out = Vec::new();
     let mut rest = c.indices;
-    for _round in 0..3 {
+    let mut tracks = Vec::new();
+    for _round in 0..PEEL_ROUNDS {
         let so: Vec<[f64; 2]> = rest.iter().map(|&i| refl.locate(xy[i])).collect();
         let (s_lo, s_hi) = so.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, q| {
             (a.0.min(q[0]), a.1.max(q[0]))
@@ -566,7 +569,7 @@ fn peel_lines(
         };
         let (mut line, mut other) = (Vec::new(), Vec::new());
         for (k, &i) in rest.iter().enumerate() {
-            if track(so[k]) {
+            if track(so[k]) <= 0.0 {
                 line.push(i);
             } else {
                 other.push(i);
@@ -584,10 +587,18 @@ fn peel_lines(
         }
         out.push(cand);
         rest = other;
+        tracks.push(track);
     }
     if out.is_empty() {
         return vec![describe(xy, intensity, rest, refl, p)];
     }
+    // The ragged edge of a peeled line (points just beyond its track's width) would chain
+    // everything that touches the line (the stripes of a gore) into one component: those
+    // points go with no piece.
+    rest.retain(|&i| {
+        let q = refl.locate(xy[i]);
+        tracks.iter().all(|t| t(q) > PEEL_EDGE_M)
+    });
     let pts: Vec<[f64; 2]> = rest.iter().map(|&i| xy[i]).collect();
     for comp in geom::components(&pts, 0.25) {
         let idx: Vec<usize> = comp.into_iter().map(|k| rest[k]).collect();
@@ -599,8 +610,17 @@ fn peel_lines(
     out
 }
 
-/// The longest line track through the (s, o) samples (see `peel_lines`): a membership test.
-fn line_track(so: &[[f64; 2]], s_lo: f64, s_hi: f64, p: &Params) -> Option<impl Fn([f64; 2]) -> bool> {
+/// Lines peeled off one cluster at most (a gore: two edge lines, the lines they meet,
+/// the lane lines beside them).
+const PEEL_ROUNDS: usize = 6;
+
+/// Points this far (m) beyond the width of a peeled line's track are its ragged edge.
+const PEEL_EDGE_M: f64 = 0.1;
+
+/// The longest line track through the (s, o) samples (see `peel_lines`), as a distance:
+/// how far (m) a sample lies beyond the track's half width (≤ 0 inside; infinite beyond
+/// its ends).
+fn line_track(so: &[[f64; 2]], s_lo: f64, s_hi: f64, p: &Params) -> Option<impl Fn([f64; 2]) -> f64 + use<>> {
     const DS: f64 = 0.5;
     const MAX_SKIP: usize = 4;
     let ns = ((s_hi - s_lo) / DS).ceil() as usize + 1;
@@ -681,9 +701,9 @@ fn line_track(so: &[[f64; 2]], s_lo: f64, s_hi: f64, p: &Params) -> Option<impl 
     let po: Vec<f64> = path.iter().map(|q| q.1).collect();
     Some(move |q: [f64; 2]| {
         if q[0] < t0 || q[0] > t1 {
-            return false;
+            return f64::INFINITY;
         }
-        (q[1] - geom::interp_clamped(&ps, &po, q[0])).abs() <= half
+        (q[1] - geom::interp_clamped(&ps, &po, q[0])).abs() - half
     })
 }
 
@@ -1117,6 +1137,100 @@ mod tests {
             }
         }
         v
+    }
+
+    /// A hatched area: four lines 2 m apart (more than the first three rounds peel) with
+    /// 45° stripes between each pair, every line with stray points at its edges. All four
+    /// lines are peeled and every stripe is a piece of its own.
+    #[test]
+    fn hatched_lines_are_all_peeled_and_their_stripes_come_apart() {
+        let (r, p) = (refl(), Params::default());
+        let mut xy: Vec<[f64; 2]> = Vec::new();
+        let lines = [0.0, 2.0, 4.0, 6.0];
+        for &o in &lines {
+            for i in 0..=(40.0 / 0.03) as usize {
+                let x = i as f64 * 0.03;
+                for j in 0..=5 {
+                    xy.push([x, o - 0.075 + j as f64 * 0.03]);
+                }
+                if i % 7 == 0 {
+                    xy.push([x, o + 0.16]);
+                    xy.push([x, o - 0.16]);
+                }
+            }
+        }
+        let mut stripes = 0;
+        for pair in lines.windows(2) {
+            for x0 in [6.0, 16.0, 26.0] {
+                stripes += 1;
+                let mut o = pair[0] + 0.1;
+                while o < pair[1] - 0.1 {
+                    let mut x = x0 + (o - pair[0]) - 0.3;
+                    while x <= x0 + (o - pair[0]) + 0.3 {
+                        xy.push([x, o]);
+                        x += 0.03;
+                    }
+                    o += 0.03;
+                }
+            }
+        }
+        let intensity = vec![100.0f32; xy.len()];
+        let whole = describe(&xy, &intensity, (0..xy.len()).collect(), &r, &p);
+        assert!(whole.line.is_none());
+        let out = peel_lines(whole, &xy, &intensity, &r, &p);
+        let peeled: Vec<&Candidate> = out.iter().filter(|c| c.shape.length_m > 30.0).collect();
+        assert_eq!(peeled.len(), lines.len(), "every line peeled");
+        assert!(peeled.iter().all(|c| c.line.is_some() && c.shape.width_m < 0.4));
+        let rest: Vec<&Candidate> = out.iter().filter(|c| c.shape.length_m <= 30.0).collect();
+        let big: Vec<&Candidate> = rest.iter().copied().filter(|c| c.indices.len() > 100).collect();
+        assert_eq!(big.len(), stripes, "one piece per stripe");
+        assert!(
+            big.iter()
+                .all(|c| c.shape.length_m < 3.5 && c.shape.angle_to_trajectory_deg > 30.0)
+        );
+    }
+
+    /// Two stripes leaving a line 3 m apart, chained along it by stray points just beyond
+    /// the line's width (too short a run to be a line of their own): once the line is
+    /// peeled, the strays go with no piece and the stripes are two pieces.
+    #[test]
+    fn the_ragged_edge_of_a_peeled_line_chains_nothing() {
+        let (r, p) = (refl(), Params::default());
+        let mut xy: Vec<[f64; 2]> = Vec::new();
+        for i in 0..=(20.0 / 0.03) as usize {
+            for j in 0..=5 {
+                xy.push([i as f64 * 0.03, -0.075 + j as f64 * 0.03]);
+            }
+        }
+        let mut x = 5.0;
+        while x <= 11.0 {
+            xy.push([x, 0.2]);
+            x += 0.2;
+        }
+        for x0 in [6.0, 9.0] {
+            let mut o = 0.1;
+            while o < 2.0 {
+                let mut x = x0 + o - 0.3;
+                while x <= x0 + o + 0.3 {
+                    xy.push([x, o]);
+                    x += 0.03;
+                }
+                o += 0.03;
+            }
+        }
+        let intensity = vec![100.0f32; xy.len()];
+        let whole = describe(&xy, &intensity, (0..xy.len()).collect(), &r, &p);
+        let out = peel_lines(whole, &xy, &intensity, &r, &p);
+        let stripes = out
+            .iter()
+            .filter(|c| c.line.is_none() && c.indices.len() > 100)
+            .count();
+        assert_eq!(
+            stripes,
+            2,
+            "{:?}",
+            out.iter().map(|c| c.indices.len()).collect::<Vec<_>>()
+        );
     }
 
     /// A zebra stripe across a side street (0.45 m wide along the trajectory, across it

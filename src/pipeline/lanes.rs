@@ -35,7 +35,9 @@
 //!    to `dash_max_run_m` are dash-like. At least `min_dashes` consecutive dash-like runs
 //!    of regular length (≥ 60 % within ±35 % of the median) with paint ≤ 80 % of their span
 //!    form a dashed stretch, and so do dash-like runs whose centres repeat with one period
-//!    (≥ 75 % of the spacings within ±15 % of the median spacing or twice it; dashes seen
+//!    (≥ 75 % of the spacings within ±15 % of one period or twice it, the period being the
+//!    median spacing or, where missing dashes make the median fall between single and
+//!    double spacings, the repeated single spacing; dashes seen
 //!    only in part have irregular lengths but keep the period); everything else is solid
 //!    (occlusion breaks a solid line into irregular runs). Where the scanner's view is
 //!    known, a dashed stretch also needs a third of its gaps (at least one) seen bare: the
@@ -745,6 +747,37 @@ fn merge_overlaps(items: Vec<Item>) -> Vec<Item> {
 }
 
 /// Maximal spans `(first, last)` of consecutive `true` values.
+/// The period of dash centres `spacings` apart, when at least three quarters of the
+/// spacings are one or two periods within `jitter` × period: the median spacing, or where
+/// missing dashes make as many double spacings as single ones (and the median falls
+/// between), the median of the spacings that a single spacing (one seen at least twice
+/// within the jitter) explains as single periods.
+fn dash_period(spacings: &[f64], jitter: f64) -> Option<f64> {
+    let on = |period: f64, x: f64| {
+        let k = (x / period).round();
+        (1.0..=2.0).contains(&k) && (x - k * period).abs() <= jitter * period
+    };
+    let fits = |period: f64| {
+        spacings.iter().filter(|&&x| on(period, x)).count() as f64 >= 0.75 * spacings.len() as f64
+    };
+    let median = geom::median(&mut spacings.to_vec());
+    if fits(median) {
+        return Some(median);
+    }
+    spacings
+        .iter()
+        .filter_map(|&cand| {
+            let mut single: Vec<f64> = spacings
+                .iter()
+                .copied()
+                .filter(|&x| (x - cand).abs() <= jitter * cand)
+                .collect();
+            (single.len() >= 2).then(|| geom::median(&mut single))
+        })
+        .filter(|&period| fits(period))
+        .max_by(|a, b| a.total_cmp(b))
+}
+
 fn true_spans(v: &[bool]) -> Vec<(usize, usize)> {
     let mut out = Vec::new();
     let mut i = 0;
@@ -830,14 +863,8 @@ fn regimes(
         let regular_period_within = |jitter: f64| {
             lens.len() >= 3 && {
                 let centres: Vec<f64> = runs[i..=j].iter().map(|r| 0.5 * (r.0 + r.1)).collect();
-                let mut spacings: Vec<f64> = centres.windows(2).map(|w| w[1] - w[0]).collect();
-                let period = geom::median(&mut spacings);
-                let on_period = |x: f64| {
-                    let k = (x / period).round();
-                    (1.0..=2.0).contains(&k) && (x - k * period).abs() <= jitter * period
-                };
-                spacings.iter().filter(|&&x| on_period(x)).count() as f64 >= 0.75 * spacings.len() as f64
-                    && lens.iter().all(|&l| l <= 0.8 * period)
+                let spacings: Vec<f64> = centres.windows(2).map(|w| w[1] - w[0]).collect();
+                dash_period(&spacings, jitter).is_some_and(|period| lens.iter().all(|&l| l <= 0.8 * period))
             }
         };
         let regular_period = regular_period_within(PERIOD_JITTER);
@@ -1337,6 +1364,36 @@ mod tests {
         let lanes = grow(&dash_pieces(&sparse), &t, &p);
         assert_eq!(lanes.lines.len(), 1);
         assert_eq!(lanes.lines[0].class, LaneLineClass::SolidLine);
+    }
+
+    /// The period of dash centres: the median spacing where it fits; where missing
+    /// dashes make as many double spacings as single ones, the repeated single spacing;
+    /// none for irregular spacings.
+    #[test]
+    fn dash_period_sees_through_missing_dashes() {
+        let near = |a: Option<f64>, b: f64| a.is_some_and(|a| (a - b).abs() < 0.2);
+        assert!(near(dash_period(&[15.0, 15.2, 14.9], 0.15), 15.0));
+        // Median 22.8 lies between the single and double spacings.
+        assert!(near(dash_period(&[30.0, 15.2, 15.3, 30.6], 0.15), 15.25));
+        assert_eq!(dash_period(&[5.0, 11.0, 23.0, 8.0], 0.15), None);
+        // One single spacing among doubles is no evidence of the period.
+        assert_eq!(dash_period(&[30.0, 15.2, 31.0, 44.0], 0.15), None);
+    }
+
+    /// A 2/6 m dashed line missing every other dash at both ends (gaps seen bare), then
+    /// 6 m on a 22 m solid line: as many double spacings as single ones put the median
+    /// between the two, yet the line is dashed, and split from the solid one.
+    #[test]
+    fn dashes_with_missing_ones_before_a_solid_line_stay_dashed() {
+        let t = traj();
+        let p = Params::default();
+        let mut pieces = dash_pieces(&[(0.0, 2.0), (16.0, 18.0), (24.0, 26.0), (32.0, 34.0), (48.0, 50.0)]);
+        pieces.push(piece(9, 56.0, 78.0, MarkingClass::SolidLine));
+        let seen = crate::pipeline::observed::test_seen_except(&t, 3.5, |_| false);
+        let lanes = grow_with_barriers(&pieces, &t, &p, &[], Some(&seen.lookup()));
+        let classes: Vec<LaneLineClass> = lanes.lines.iter().map(|l| l.class).collect();
+        assert_eq!(lanes.lines.len(), 2, "{classes:?}");
+        assert!(classes.contains(&LaneLineClass::DashedLine) && classes.contains(&LaneLineClass::SolidLine));
     }
 
     #[test]
