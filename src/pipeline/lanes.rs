@@ -774,7 +774,14 @@ fn dash_period(spacings: &[f64], jitter: f64) -> Option<f64> {
                 .collect();
             (single.len() >= 2).then(|| geom::median(&mut single))
         })
-        .filter(|&period| fits(period))
+        // Only to see through missing dashes: a double spacing must be among them (a
+        // sparse solid line's fragments can show a loose single period, never this).
+        .filter(|&period| {
+            fits(period)
+                && spacings
+                    .iter()
+                    .any(|&x| (x / period).round() == 2.0 && on(period, x))
+        })
         .max_by(|a, b| a.total_cmp(b))
 }
 
@@ -1376,6 +1383,8 @@ mod tests {
         // Median 22.8 lies between the single and double spacings.
         assert!(near(dash_period(&[30.0, 15.2, 15.3, 30.6], 0.15), 15.25));
         assert_eq!(dash_period(&[5.0, 11.0, 23.0, 8.0], 0.15), None);
+        // A loose single period with no double spacing is left to the median test.
+        assert_eq!(dash_period(&[14.95, 18.45, 14.1, 12.2], 0.15), None);
         // One single spacing among doubles is no evidence of the period.
         assert_eq!(dash_period(&[30.0, 15.2, 31.0, 44.0], 0.15), None);
     }
