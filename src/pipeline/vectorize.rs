@@ -23,8 +23,10 @@
 //! common width and edges, worn fragments absorbed, missing stripes filled); "stop lines"
 //! along the road at the offset of a line piece they continue made line pieces (a far
 //! line's sparse pieces read as bars); stop lines joined with the marks on their centre
-//! line (`stoplines`); lane-line growth with
-//! crosswalks and stop lines as barriers; line pieces whose width the points do not
+//! line (`stoplines`); "stop lines" across the road that a lane line runs on through made
+//! `unknown`; lane-line growth with crosswalks and stop lines as barriers; bars across the
+//! road wholly beyond the outermost lane line on their side (a side street's centre line,
+//! dashes, crossing stripes) made `unknown`; line pieces whose width the points do not
 //! resolve widened to their lane line's width; gaps of solid lane lines bridged (short
 //! ones always, long ones between longer pieces, and up to `lane_lines.max_unseen_gap_m`
 //! where the scanner saw no bare asphalt on the gap's course); dashes put on their line's design
@@ -837,6 +839,49 @@ fn stop_lines_crossed_by_lines(pieces: &mut [Piece], refl: &RefLine) {
     }
 }
 
+/// How far along the road (m) the lane lines beside a bar across it are looked for, and how
+/// far (m) beyond the outermost of them the bar must begin, for [`stop_lines_beyond_edges`].
+const EDGE_WINDOW_M: f64 = 40.0;
+const BEYOND_EDGE_M: f64 = 1.0;
+
+/// A "stop line" across the road that lies wholly beyond the outermost lane line on its
+/// side (within [`EDGE_WINDOW_M`] along the road, by more than [`BEYOND_EDGE_M`]) is no stop
+/// line of this road: a stop line runs across the lanes the vehicle drives, between their
+/// lines. Beyond the edge line, bars across the trajectory are the markings of a side street,
+/// which runs across it: its centre line, dashes and crossing stripes. Such a bar becomes
+/// `unknown`. Without lane lines beside it nothing is known of the edge and the bar stays.
+fn stop_lines_beyond_edges(pieces: &mut [Piece], lines: &[lanes::LaneResult], refl: &RefLine) {
+    let samples: Vec<[f64; 2]> = lines
+        .iter()
+        .flat_map(|l| l.line.iter().map(|&v| refl.locate(v)))
+        .collect();
+    for p in pieces.iter_mut() {
+        if p.marking.class != MarkingClass::StopLine || p.marking.outline.len() < 4 {
+            continue;
+        }
+        let [s0, s1, o0, o1] = so_box(&p.marking.outline, refl);
+        if o1 - o0 < 2.0 * (s1 - s0) || (o0 < 0.0 && o1 > 0.0) {
+            continue;
+        }
+        let beside = samples
+            .iter()
+            .filter(|q| q[0] >= s0 - EDGE_WINDOW_M && q[0] <= s1 + EDGE_WINDOW_M)
+            .map(|q| q[1]);
+        let beyond = if o0 >= 0.0 {
+            beside
+                .fold(None, |m: Option<f64>, o| Some(m.map_or(o, |m| m.max(o))))
+                .is_some_and(|edge| o0 > edge + BEYOND_EDGE_M)
+        } else {
+            beside
+                .fold(None, |m: Option<f64>, o| Some(m.map_or(o, |m| m.min(o))))
+                .is_some_and(|edge| o1 < edge - BEYOND_EDGE_M)
+        };
+        if beyond {
+            p.marking.class = MarkingClass::Unknown;
+        }
+    }
+}
+
 /// Largest offset difference (m) between a bar along the road and the line piece it
 /// continues, and the largest gap (m) between them, for [`lines_not_stop_lines`].
 const ALONG_BAR_OFFSET_M: f64 = 0.2;
@@ -962,6 +1007,7 @@ pub fn assemble(
     for &(k, class) in &lanes.classes {
         pieces[k].marking.class = class;
     }
+    stop_lines_beyond_edges(&mut pieces, &lanes.lines, &refl);
     if params.isolated_dashes_unknown {
         let mut in_lane = vec![false; pieces.len()];
         for &(k, _) in &lanes.classes {
@@ -1299,6 +1345,42 @@ mod tests {
         let stripe = rect(MarkingClass::Crosswalk, 32.0, 36.0, 2.0, 2.45);
         assert_eq!(
             class_of_bar(vec![bar(), dash(25.0), dash(34.2), stripe]),
+            MarkingClass::StopLine
+        );
+    }
+
+    /// Bars across the road: between the edge lines (or just beyond one) they stay stop
+    /// lines; wholly beyond an edge line they are a side street's markings (`unknown`);
+    /// with no lane line within 40 m nothing is known of the edges and they stay.
+    #[test]
+    fn bars_across_beyond_the_edge_lines_are_no_stop_lines() {
+        let traj = crate::pipeline::types::test_straight_trajectory(100, -20.0);
+        let refl = RefLine::new(&traj);
+        let lane = |o: f64, x0: f64, x1: f64| lanes::LaneResult {
+            class: LaneLineClass::SolidLine,
+            line: vec![[x0, o], [x1, o]],
+            confidence: 0.9,
+            length_m: x1 - x0,
+            pieces: vec![],
+            start: [x0, o],
+        };
+        let edges = vec![
+            lane(-5.3, 0.0, 25.0),
+            lane(5.3, 0.0, 25.0),
+            lane(-5.3, 35.0, 80.0),
+        ];
+        let class_of = |o0: f64, o1: f64, lines: &[lanes::LaneResult]| {
+            let mut pieces = vec![rect(MarkingClass::StopLine, 30.0, 30.3, o0, o1)];
+            stop_lines_beyond_edges(&mut pieces, lines, &refl);
+            pieces[0].marking.class
+        };
+        assert_eq!(class_of(-5.0, -1.0, &edges), MarkingClass::StopLine);
+        assert_eq!(class_of(-5.0, 5.0, &edges), MarkingClass::StopLine);
+        assert_eq!(class_of(-14.0, -9.0, &edges), MarkingClass::Unknown);
+        assert_eq!(class_of(6.0, 8.0, &edges), MarkingClass::StopLine);
+        assert_eq!(class_of(9.0, 12.0, &edges), MarkingClass::Unknown);
+        assert_eq!(
+            class_of(-14.0, -9.0, &[lane(-5.3, 75.0, 80.0)]),
             MarkingClass::StopLine
         );
     }
