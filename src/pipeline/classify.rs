@@ -49,6 +49,9 @@
 //!    - a thin or filled elongated shape steeper than `noise_angle_deg` (Yao 2021: 45°) to
 //!      the trajectory that matched none of the above → dropped as noise (sealant, cracks);
 //!    - everything else → `unknown` (arrows, diamonds, text: the learned classifier's job).
+//!    Kept `unknown` pieces up to 6 m long within 0.5 m of each other (a worn or sparsely
+//!    scanned arrow or diamond in pieces) share their union as `Candidate::whole`, for the
+//!    learned classifier to put back together (`group_fragments`).
 //!    Lane-line context (a "dash" inside a solid lane line is an occluded solid piece) is
 //!    applied later by `vectorize`.
 //!
@@ -319,6 +322,7 @@ pub fn assess(
     let feats = rejoin_across(feats, &xy, &cloud.intensity, &refl, params);
     let mut out: Vec<(Candidate, Option<DropReason>)> = feats.into_iter().map(|c| rule(c, params)).collect();
     confirm_groups(&mut out);
+    group_fragments(&mut out, &xy, &cloud.intensity, &refl, params);
     out.sort_by(|a, b| {
         a.0.shape
             .mileage_m
@@ -534,6 +538,109 @@ fn line_geometry(pts: &[[f64; 2]], refl: &RefLine, p: &Params) -> Option<LineGeo
     })
 }
 
+/// Fragments closer than this (m, nearest points) belong to one group in
+/// [`group_fragments`].
+const FRAGMENT_GAP_M: f64 = 0.5;
+/// Fragments longer than this (m) are no part of one painted object's pieces.
+const FRAGMENT_MAX_LENGTH_M: f64 = 6.0;
+
+/// Worn or sparsely scanned arrows and diamonds fall apart into several `unknown` pieces
+/// that no single look can name. Kept `unknown` candidates no longer than
+/// [`FRAGMENT_MAX_LENGTH_M`] that lie within [`FRAGMENT_GAP_M`] of each other (single
+/// linkage on their nearest points) form a group; a group of two or more whose union is no
+/// longer than [`MAX_OBJECT_LENGTH_M`] is given to each member as its `whole`, for the
+/// learned classifier to put back together when the union is one painted object (as for
+/// the pieces `peel_lines` leaves).
+fn group_fragments(
+    items: &mut [(Candidate, Option<DropReason>)],
+    xy: &[[f64; 2]],
+    intensity: &[f32],
+    refl: &RefLine,
+    p: &Params,
+) {
+    let frag: Vec<usize> = (0..items.len())
+        .filter(|&k| {
+            let (c, d) = &items[k];
+            d.is_none()
+                && c.class == MarkingClass::Unknown
+                && c.whole.is_none()
+                && c.shape.length_m <= FRAGMENT_MAX_LENGTH_M
+        })
+        .collect();
+    if frag.len() < 2 {
+        return;
+    }
+    // Bounding boxes first, then the nearest points of the two fragments.
+    let boxes: Vec<[f64; 4]> = frag
+        .iter()
+        .map(|&k| {
+            items[k].0.indices.iter().fold(
+                [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY],
+                |b, &i| {
+                    [
+                        b[0].min(xy[i][0]),
+                        b[1].min(xy[i][1]),
+                        b[2].max(xy[i][0]),
+                        b[3].max(xy[i][1]),
+                    ]
+                },
+            )
+        })
+        .collect();
+    let g2 = FRAGMENT_GAP_M * FRAGMENT_GAP_M;
+    let near = |a: usize, b: usize| {
+        let (p, q) = (&boxes[a], &boxes[b]);
+        if p[0] > q[2] + FRAGMENT_GAP_M
+            || q[0] > p[2] + FRAGMENT_GAP_M
+            || p[1] > q[3] + FRAGMENT_GAP_M
+            || q[1] > p[3] + FRAGMENT_GAP_M
+        {
+            return false;
+        }
+        let (ia, ib) = (&items[frag[a]].0.indices, &items[frag[b]].0.indices);
+        ia.iter().any(|&i| {
+            ib.iter().any(|&j| {
+                let (dx, dy) = (xy[i][0] - xy[j][0], xy[i][1] - xy[j][1]);
+                dx * dx + dy * dy <= g2
+            })
+        })
+    };
+    let mut parent: Vec<usize> = (0..frag.len()).collect();
+    fn root(parent: &mut [usize], mut a: usize) -> usize {
+        while parent[a] != a {
+            parent[a] = parent[parent[a]];
+            a = parent[a];
+        }
+        a
+    }
+    for a in 0..frag.len() {
+        for b in a + 1..frag.len() {
+            let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
+            if ra != rb && near(a, b) {
+                parent[ra.max(rb)] = ra.min(rb);
+            }
+        }
+    }
+    let mut groups: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
+    for (a, &k) in frag.iter().enumerate() {
+        groups.entry(root(&mut parent, a)).or_default().push(k);
+    }
+    for members in groups.into_values().filter(|m| m.len() >= 2) {
+        let idx: Vec<usize> = members
+            .iter()
+            .flat_map(|&k| items[k].0.indices.iter().copied())
+            .collect();
+        let union = describe(xy, intensity, idx, refl, p);
+        if union.shape.length_m > MAX_OBJECT_LENGTH_M {
+            continue;
+        }
+        let whole = Arc::new(union);
+        for &k in &members {
+            items[k].0.whole = Some(Arc::clone(&whole));
+        }
+    }
+}
+
 /// Split painted lines off a long cluster that is not one line (see `assess`): in the
 /// trajectory frame, per 0.5 m mileage slice, the offsets form runs (intervals without a
 /// gap > 0.1 m or 1.5 point spacings); a dynamic programme over the slices finds the
@@ -541,7 +648,8 @@ fn line_geometry(pts: &[[f64; 2]], refl: &RefLine, p: &Params) -> Option<LineGeo
 /// (≤ 0.1 m + 0.02 m per skipped slice from one to the next, up to 4 slices skipped where
 /// something crosses the line). A track at least `solid_min_length_m` long takes every
 /// point within its half width (+3 cm) of the track's centre; the rest is re-clustered
-/// (0.25 m components) and peeled again, up to three lines. Cost: O(m log m) for m points.
+/// (0.25 m components) and peeled again, up to [`PEEL_ROUNDS`] lines; points just beyond a
+/// peeled track ([`PEEL_EDGE_M`]) go with no piece. Cost: O(m log m) for m points.
 fn peel_lines(
     c: Candidate,
     xy: &[[f64; 2]],
@@ -1137,6 +1245,47 @@ mod tests {
             }
         }
         v
+    }
+
+    /// Two worn pieces of one mark 0.3 m apart share one `whole` (their union); a piece
+    /// 2 m away and a dropped fragment get none.
+    #[test]
+    fn nearby_unknown_fragments_are_offered_whole() {
+        let (r, p) = (refl(), Params::default());
+        let mut xy: Vec<[f64; 2]> = Vec::new();
+        let mut block = |x0: f64, x1: f64, y0: f64, y1: f64| {
+            let start = xy.len();
+            let mut x = x0;
+            while x <= x1 {
+                let mut y = y0;
+                while y <= y1 {
+                    xy.push([x, y]);
+                    y += 0.03;
+                }
+                x += 0.03;
+            }
+            (start..xy.len()).collect::<Vec<usize>>()
+        };
+        let groups = [
+            block(10.0, 11.0, 1.0, 1.5),
+            block(11.3, 12.0, 1.2, 1.8),
+            block(14.0, 14.6, 1.0, 1.4),
+            block(12.3, 12.6, 1.0, 1.3),
+        ];
+        let intensity = vec![100.0f32; xy.len()];
+        let mut items: Vec<(Candidate, Option<DropReason>)> = groups
+            .iter()
+            .map(|g| (describe(&xy, &intensity, g.clone(), &r, &p), None))
+            .collect();
+        items[3].1 = Some(DropReason::Tiny);
+        group_fragments(&mut items, &xy, &intensity, &r, &p);
+        let (a, b) = (
+            items[0].0.whole.as_ref().expect("grouped"),
+            items[1].0.whole.as_ref().expect("grouped"),
+        );
+        assert!(Arc::ptr_eq(a, b));
+        assert_eq!(a.indices.len(), groups[0].len() + groups[1].len());
+        assert!(items[2].0.whole.is_none() && items[3].0.whole.is_none());
     }
 
     /// A hatched area: four lines 2 m apart (more than the first three rounds peel) with

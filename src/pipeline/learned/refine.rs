@@ -28,7 +28,9 @@
 //! 4. Clusters the classify stage peeled a line off and that are no longer than one painted
 //!    object (`Candidate::whole`: a 9 m highway arrow's shaft passes the line test) are shown
 //!    to the network whole as well; when it names one such painted object with probability
-//!    ≥ `dash_overrule_confidence`, the pieces are replaced by the whole cluster.
+//!    ≥ `dash_overrule_confidence`, the pieces are replaced by the whole cluster. The same
+//!    holds for groups of nearby `unknown` fragments, whose union the classify stage
+//!    offers as their `whole` (a worn arrow or diamond in pieces).
 //!
 //! # Parameters
 //! [`Params`]: `mode` (`auto`: run when ONNX Runtime is installed, otherwise leave the
