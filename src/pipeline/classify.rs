@@ -570,60 +570,25 @@ fn group_fragments(
     if frag.len() < 2 {
         return;
     }
-    // Bounding boxes first, then the nearest points of the two fragments.
-    let boxes: Vec<[f64; 4]> = frag
-        .iter()
-        .map(|&k| {
-            items[k].0.indices.iter().fold(
-                [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY],
-                |b, &i| {
-                    [
-                        b[0].min(xy[i][0]),
-                        b[1].min(xy[i][1]),
-                        b[2].max(xy[i][0]),
-                        b[3].max(xy[i][1]),
-                    ]
-                },
-            )
-        })
-        .collect();
-    let g2 = FRAGMENT_GAP_M * FRAGMENT_GAP_M;
-    let near = |a: usize, b: usize| {
-        let (p, q) = (&boxes[a], &boxes[b]);
-        if p[0] > q[2] + FRAGMENT_GAP_M
-            || q[0] > p[2] + FRAGMENT_GAP_M
-            || p[1] > q[3] + FRAGMENT_GAP_M
-            || q[1] > p[3] + FRAGMENT_GAP_M
-        {
-            return false;
+    // Single linkage on the nearest points: components of the fragments' points at the
+    // gap; a fragment is one set with every fragment that shares a component with it.
+    let mut owner: Vec<usize> = Vec::new();
+    let mut pts: Vec<[f64; 2]> = Vec::new();
+    for (f, &k) in frag.iter().enumerate() {
+        for &i in &items[k].0.indices {
+            owner.push(f);
+            pts.push(xy[i]);
         }
-        let (ia, ib) = (&items[frag[a]].0.indices, &items[frag[b]].0.indices);
-        ia.iter().any(|&i| {
-            ib.iter().any(|&j| {
-                let (dx, dy) = (xy[i][0] - xy[j][0], xy[i][1] - xy[j][1]);
-                dx * dx + dy * dy <= g2
-            })
-        })
-    };
-    let mut parent: Vec<usize> = (0..frag.len()).collect();
-    fn root(parent: &mut [usize], mut a: usize) -> usize {
-        while parent[a] != a {
-            parent[a] = parent[parent[a]];
-            a = parent[a];
-        }
-        a
     }
-    for a in 0..frag.len() {
-        for b in a + 1..frag.len() {
-            let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
-            if ra != rb && near(a, b) {
-                parent[ra.max(rb)] = ra.min(rb);
-            }
+    let mut parent: Vec<usize> = (0..frag.len()).collect();
+    for comp in geom::components(&pts, FRAGMENT_GAP_M) {
+        for w in comp.windows(2) {
+            geom::union(&mut parent, owner[w[0]], owner[w[1]]);
         }
     }
     let mut groups: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
-    for (a, &k) in frag.iter().enumerate() {
-        groups.entry(root(&mut parent, a)).or_default().push(k);
+    for (f, &k) in frag.iter().enumerate() {
+        groups.entry(geom::find_root(&mut parent, f)).or_default().push(k);
     }
     for members in groups.into_values().filter(|m| m.len() >= 2) {
         let idx: Vec<usize> = members
@@ -662,10 +627,11 @@ fn peel_lines(
     }
     let whole = (c.shape.length_m <= MAX_OBJECT_LENGTH_M).then(|| Arc::new(c.clone()));
     let mut out = Vec::new();
+    // The points left and their (s, o), located once and carried through the rounds.
     let mut rest = c.indices;
+    let mut so: Vec<[f64; 2]> = rest.iter().map(|&i| refl.locate(xy[i])).collect();
     let mut tracks = Vec::new();
     for _round in 0..PEEL_ROUNDS {
-        let so: Vec<[f64; 2]> = rest.iter().map(|&i| refl.locate(xy[i])).collect();
         let (s_lo, s_hi) = so.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, q| {
             (a.0.min(q[0]), a.1.max(q[0]))
         });
@@ -675,26 +641,17 @@ fn peel_lines(
         let Some(track) = line_track(&so, s_lo, s_hi, p) else {
             break;
         };
-        let (mut line, mut other) = (Vec::new(), Vec::new());
-        for (k, &i) in rest.iter().enumerate() {
-            if track(so[k]) <= 0.0 {
-                line.push(i);
-            } else {
-                other.push(i);
-            }
-        }
-        if line.len() < 20 {
+        let (on, off): (Vec<usize>, Vec<usize>) = (0..rest.len()).partition(|&k| track(so[k]) <= 0.0);
+        if on.len() < 20 {
             break;
         }
-        let cand = describe(xy, intensity, line, refl, p);
+        let cand = describe(xy, intensity, on.iter().map(|&k| rest[k]).collect(), refl, p);
         if cand.line.is_none() {
             // Not a clean line after all: keep the cluster as it was.
-            other.extend(cand.indices);
-            rest = other;
             break;
         }
         out.push(cand);
-        rest = other;
+        (rest, so) = off.iter().map(|&k| (rest[k], so[k])).unzip();
         tracks.push(track);
     }
     if out.is_empty() {
@@ -703,10 +660,10 @@ fn peel_lines(
     // The ragged edge of a peeled line (points just beyond its track's width) would chain
     // everything that touches the line (the stripes of a gore) into one component: those
     // points go with no piece.
-    rest.retain(|&i| {
-        let q = refl.locate(xy[i]);
-        tracks.iter().all(|t| t(q) > PEEL_EDGE_M)
-    });
+    let rest: Vec<usize> = (0..rest.len())
+        .filter(|&k| tracks.iter().all(|t| t(so[k]) > PEEL_EDGE_M))
+        .map(|k| rest[k])
+        .collect();
     let pts: Vec<[f64; 2]> = rest.iter().map(|&i| xy[i]).collect();
     for comp in geom::components(&pts, 0.25) {
         let idx: Vec<usize> = comp.into_iter().map(|k| rest[k]).collect();

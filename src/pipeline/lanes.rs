@@ -1470,14 +1470,20 @@ mod tests {
         );
     }
 
-    /// The class of the one lane line grown from `pieces` with what the scanner saw.
-    fn one_line_class(
-        pieces: &[LanePiece],
-        t: &Trajectory,
-        p: &Params,
-        seen: Option<&crate::pipeline::observed::Observed>,
-    ) -> LaneLineClass {
-        let lanes = grow_with_barriers(pieces, t, p, &[], seen.map(|s| s.lookup()).as_ref());
+    /// The class of the one lane line grown from `pieces` along [`traj`] with default
+    /// parameters: with no record of what the scanner saw (`None`), or with the line's
+    /// course (offset 3.5 m) seen everywhere, its gaps bare (`Some(true)`) or holding no
+    /// dark point (`Some(false)`).
+    fn one_line_class(pieces: &[LanePiece], bare: Option<bool>) -> LaneLineClass {
+        let t = traj();
+        let seen = bare.map(|b| test_seen_except(&t, 3.5, move |_| !b));
+        let lanes = grow_with_barriers(
+            pieces,
+            &t,
+            &Params::default(),
+            &[],
+            seen.as_ref().map(|s| s.lookup()).as_ref(),
+        );
         assert_eq!(lanes.lines.len(), 1);
         lanes.lines[0].class
     }
@@ -1487,21 +1493,11 @@ mod tests {
     /// no dark point (the points there are paint), and dashed without any record.
     #[test]
     fn fragments_without_bare_gaps_are_no_dashes() {
-        let t = traj();
-        let p = Params::default();
         let spans: Vec<(f64, f64)> = (0..12).map(|i| (6.0 * i as f64, 6.0 * i as f64 + 1.5)).collect();
         let pieces = dash_pieces(&spans);
-        let class =
-            |seen: Option<&crate::pipeline::observed::Observed>| one_line_class(&pieces, &t, &p, seen);
-        assert_eq!(class(None), LaneLineClass::DashedLine);
-        assert_eq!(
-            class(Some(&test_seen_except(&t, 3.5, |_| false))),
-            LaneLineClass::DashedLine
-        );
-        assert_eq!(
-            class(Some(&test_seen_except(&t, 3.5, |_| true))),
-            LaneLineClass::SolidLine
-        );
+        assert_eq!(one_line_class(&pieces, None), LaneLineClass::DashedLine);
+        assert_eq!(one_line_class(&pieces, Some(true)), LaneLineClass::DashedLine);
+        assert_eq!(one_line_class(&pieces, Some(false)), LaneLineClass::SolidLine);
     }
 
     /// A far GB 6/9 m dashed line read in part (0.8-3.8 m of each dash, so the centres
@@ -1509,8 +1505,6 @@ mod tests {
     /// solid without that evidence (the same fragments of a sparse solid line).
     #[test]
     fn partly_seen_dashes_with_bare_gaps_keep_their_period() {
-        let t = traj();
-        let p = Params::default();
         let pieces = dash_pieces(&[
             (12.4, 16.0),
             (28.5, 29.8),
@@ -1518,13 +1512,8 @@ mod tests {
             (59.8, 63.6),
             (72.7, 75.1),
         ]);
-        let class =
-            |seen: Option<&crate::pipeline::observed::Observed>| one_line_class(&pieces, &t, &p, seen);
-        assert_eq!(class(None), LaneLineClass::SolidLine);
-        assert_eq!(
-            class(Some(&test_seen_except(&t, 3.5, |_| false))),
-            LaneLineClass::DashedLine
-        );
+        assert_eq!(one_line_class(&pieces, None), LaneLineClass::SolidLine);
+        assert_eq!(one_line_class(&pieces, Some(true)), LaneLineClass::DashedLine);
     }
 
     /// Across a 23 m gap the centreline follows the trend of the paint on either side, not

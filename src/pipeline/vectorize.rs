@@ -774,6 +774,16 @@ fn so_box(outline: &[[f64; 2]], refl: &RefLine) -> [f64; 4] {
     )
 }
 
+/// The (s, o) box of a stop line that lies across the road (at least twice as long across
+/// as along): what both stop-line context rules judge.
+fn stop_line_across(p: &Piece, refl: &RefLine) -> Option<[f64; 4]> {
+    if p.marking.class != MarkingClass::StopLine || p.marking.outline.len() < 4 {
+        return None;
+    }
+    let b = so_box(&p.marking.outline, refl);
+    (b[3] - b[2] >= 2.0 * (b[1] - b[0])).then_some(b)
+}
+
 /// Longest gap (m) on either side of a bar across the road between it and the pieces of a
 /// line that runs on through it, for [`stop_lines_crossed_by_lines`]: a dash gap (GB 9 m,
 /// MUTCD 30 ft) plus a metre.
@@ -807,13 +817,9 @@ fn stop_lines_crossed_by_lines(pieces: &mut [Piece], refl: &RefLine) {
         .map(|p| so_box(&p.marking.outline, refl))
         .collect();
     for p in pieces.iter_mut() {
-        if p.marking.class != MarkingClass::StopLine || p.marking.outline.len() < 4 {
+        let Some([s0, s1, o0, o1]) = stop_line_across(p, refl) else {
             continue;
-        }
-        let [s0, s1, o0, o1] = so_box(&p.marking.outline, refl);
-        if o1 - o0 < 2.0 * (s1 - s0) {
-            continue;
-        }
+        };
         // A crosswalk next to it: a stop line where it belongs, and the stripes beyond it
         // (or their worn pieces read as dashes) are no line running on.
         let near_crossing = crossings.iter().any(|c| {
@@ -856,27 +862,21 @@ fn stop_lines_beyond_edges(pieces: &mut [Piece], lines: &[lanes::LaneResult], re
         .flat_map(|l| l.line.iter().map(|&v| refl.locate(v)))
         .collect();
     for p in pieces.iter_mut() {
-        if p.marking.class != MarkingClass::StopLine || p.marking.outline.len() < 4 {
+        let Some([s0, s1, o0, o1]) = stop_line_across(p, refl) else {
             continue;
-        }
-        let [s0, s1, o0, o1] = so_box(&p.marking.outline, refl);
-        if o1 - o0 < 2.0 * (s1 - s0) || (o0 < 0.0 && o1 > 0.0) {
-            continue;
-        }
-        let beside = samples
+        };
+        // Offsets mirrored to the bar's side: its inner end and the outermost line there.
+        let (side, inner) = match (o0 >= 0.0, o1 <= 0.0) {
+            (true, _) => (1.0, o0),
+            (_, true) => (-1.0, -o1),
+            _ => continue,
+        };
+        let edge = samples
             .iter()
             .filter(|q| q[0] >= s0 - EDGE_WINDOW_M && q[0] <= s1 + EDGE_WINDOW_M)
-            .map(|q| q[1]);
-        let beyond = if o0 >= 0.0 {
-            beside
-                .fold(None, |m: Option<f64>, o| Some(m.map_or(o, |m| m.max(o))))
-                .is_some_and(|edge| o0 > edge + BEYOND_EDGE_M)
-        } else {
-            beside
-                .fold(None, |m: Option<f64>, o| Some(m.map_or(o, |m| m.min(o))))
-                .is_some_and(|edge| o1 < edge - BEYOND_EDGE_M)
-        };
-        if beyond {
+            .map(|q| side * q[1])
+            .fold(f64::NEG_INFINITY, f64::max);
+        if edge.is_finite() && inner > edge + BEYOND_EDGE_M {
             p.marking.class = MarkingClass::Unknown;
         }
     }
