@@ -14,6 +14,8 @@ pub mod config;
 pub mod eval;
 /// SQLite job queue and workers.
 pub mod jobs;
+/// Process-wide memory policy (the allocator's thresholds).
+pub mod memory;
 /// The extraction pipeline: pure, synchronous stages from points to vectors.
 pub mod pipeline;
 /// Synthetic mobile-mapping surveys (ray-cast scenes with truth) for tests and demos.

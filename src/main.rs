@@ -34,6 +34,8 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    // Before any thread starts: the pipeline's per-chunk columns reuse freed memory.
+    roadmark::memory::tune_allocator();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Extract(a) => commands::extract::run(a),
