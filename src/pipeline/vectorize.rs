@@ -556,16 +556,16 @@ fn sub_line(lane: &[[f64; 2]], a: f64, b: f64) -> Vec<[f64; 2]> {
 /// Dashes of the dashed lane lines put on their line's design (see [`super::dashes`]):
 /// short dashes that fit the pattern get their painted extent, and up to
 /// `fill_missing_dashes` missing dashes in a row are added (confidence halved, no points).
-/// Returns the added pieces.
+/// A line with too few complete dashes for a design of its own is tried on the designs of
+/// the drive's other dashed lines. Returns the added pieces.
 fn regularise_dashes(pieces: &mut [Piece], lines: &[lanes::LaneResult], params: &Params) -> Vec<Piece> {
-    let mut added = Vec::new();
-    for l in lines
+    let fill_max = params.fill_missing_dashes as usize;
+    let dashed: Vec<&lanes::LaneResult> = lines
         .iter()
         .filter(|l| l.class == LaneLineClass::DashedLine && l.line.len() >= 2)
-    {
-        let total = geom::polyline_length(&l.line);
-        let spans: Vec<dashes::Span> = l
-            .pieces
+        .collect();
+    let spans_of = |l: &lanes::LaneResult, pieces: &[Piece]| -> Vec<dashes::Span> {
+        l.pieces
             .iter()
             .filter(|&&k| pieces[k].marking.class == MarkingClass::DashedLine)
             .filter_map(|&k| {
@@ -581,8 +581,19 @@ fn regularise_dashes(pieces: &mut [Piece], lines: &[lanes::LaneResult], params: 
                     confidence: pieces[k].marking.confidence,
                 })
             })
-            .collect();
-        let plan = dashes::plan(&spans, params.fill_missing_dashes as usize);
+            .collect()
+    };
+    let all_spans: Vec<Vec<dashes::Span>> = dashed.iter().map(|l| spans_of(l, pieces)).collect();
+    let own: Vec<dashes::Plan> = all_spans.iter().map(|sp| dashes::plan(sp, fill_max)).collect();
+    let designs: Vec<dashes::Design> = own.iter().filter_map(dashes::Plan::design).collect();
+    let mut added = Vec::new();
+    for ((l, spans), own) in dashed.into_iter().zip(&all_spans).zip(own) {
+        let total = geom::polyline_length(&l.line);
+        let plan = if own.period > 0.0 {
+            own
+        } else {
+            dashes::plan_with_designs(spans, &designs, fill_max)
+        };
         // (centreline, outline) of a dash from station a to b.
         type Drawn = (Vec<[f64; 2]>, Vec<[f64; 2]>);
         let make = |a: f64, b: f64, width: f64| -> Option<Drawn> {
