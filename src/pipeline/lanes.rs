@@ -1086,7 +1086,7 @@ fn centreline(
         .windows(2)
         .map(|w| {
             let (a, b) = (w[0].1, w[1].0);
-            let hw = ((b - a) / 4.0).clamp(h, 10.0);
+            let hw = ((b - a) / 4.0).min(10.0).max(h);
             let wide = |s: f64| geom::local_linear(&xs, &ys, &ws, s, hw, 3.0).unwrap_or_else(|| fit(s));
             (wide(a), wide(b))
         })
@@ -1680,5 +1680,22 @@ mod tests {
                 bend(x)
             );
         }
+    }
+
+    /// A bandwidth wider than the 10 m cap of a gap's end fits (`smoothing_m` up to 50, or
+    /// a far dashed line's cross-validated 16 m) bridges the gap with that bandwidth
+    /// instead of panicking on an inverted clamp.
+    #[test]
+    fn a_bandwidth_above_the_gap_fit_cap_bridges_gaps() {
+        let p = Params {
+            smoothing_m: 12.0,
+            ..Params::default()
+        };
+        let mut spans: Vec<(f64, f64)> = (0..5).map(|i| (6.0 * i as f64, 6.0 * i as f64 + 2.0)).collect();
+        spans.extend((0..5).map(|i| (60.0 + 6.0 * i as f64, 62.0 + 6.0 * i as f64)));
+        let lanes = grow(&dash_pieces(&spans), &traj(), &p);
+        assert_eq!(lanes.lines.len(), 1, "{:?}", lanes.lines);
+        let line = &lanes.lines[0].line;
+        assert!((y_at(line, 45.0) - 3.5).abs() < 0.01, "{line:?}");
     }
 }
