@@ -1691,9 +1691,12 @@ mod tests {
             smoothing_m: 12.0,
             ..Params::default()
         };
-        let mut spans: Vec<(f64, f64)> = (0..5).map(|i| (6.0 * i as f64, 6.0 * i as f64 + 2.0)).collect();
-        spans.extend((0..5).map(|i| (60.0 + 6.0 * i as f64, 62.0 + 6.0 * i as f64)));
-        let lanes = grow(&dash_pieces(&spans), &traj(), &p);
+        // Two solid pieces 34 m apart: a gap wider than twice the bandwidth.
+        let pieces = [
+            piece(0, 0.0, 26.0, MarkingClass::SolidLine),
+            piece(1, 60.0, 78.0, MarkingClass::SolidLine),
+        ];
+        let lanes = grow(&pieces, &traj(), &p);
         assert_eq!(lanes.lines.len(), 1, "{:?}", lanes.lines);
         let line = &lanes.lines[0].line;
         assert!((y_at(line, 45.0) - 3.5).abs() < 0.01, "{line:?}");
