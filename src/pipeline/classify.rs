@@ -53,7 +53,10 @@
 //!    scanned arrow or diamond in pieces) share their union as `Candidate::whole`, for the
 //!    learned classifier to put back together (`group_fragments`).
 //!    Lane-line context (a "dash" inside a solid lane line is an occluded solid piece) is
-//!    applied later by `vectorize`.
+//!    applied later by `vectorize`. Clusters dropped as too small that are still pieces of a
+//!    line along the road ([`is_line_fragment`]: a far lane's dash seen as one scan row's
+//!    few returns) are returned apart by [`run_with_fragments`]; `vectorize` keeps them only
+//!    where they make a lane line on the drive's dash design.
 //!
 //! # Parameters
 //! See [`Params`]; lengths in metres, angles in degrees.
@@ -296,6 +299,47 @@ pub fn run(cloud: &PointCloud, clusters: &[Cluster], traj: &Trajectory, params: 
         .into_iter()
         .filter_map(|(c, d)| d.is_none().then_some(c))
         .collect()
+}
+
+/// Like [`run`], and also the line fragments among the dropped candidates (see
+/// [`is_line_fragment`]), classed `dashed_line` with a low confidence.
+pub fn run_with_fragments(
+    cloud: &PointCloud,
+    clusters: &[Cluster],
+    traj: &Trajectory,
+    params: &Params,
+) -> (Vec<Candidate>, Vec<Candidate>) {
+    let mut kept = Vec::new();
+    let mut fragments = Vec::new();
+    for (mut c, d) in assess(cloud, clusters, traj, params) {
+        match d {
+            None => kept.push(c),
+            Some(_) if is_line_fragment(&c, d, params) => {
+                c.class = MarkingClass::DashedLine;
+                c.confidence = FRAGMENT_CONFIDENCE;
+                fragments.push(c);
+            }
+            Some(_) => {}
+        }
+    }
+    (kept, fragments)
+}
+
+/// Confidence of a line fragment that joins a lane line.
+pub const FRAGMENT_CONFIDENCE: f64 = 0.3;
+
+/// A cluster too small to stand as a marking that is still a piece of a line along the
+/// road: at least 4 returns over at least 0.3 m, within `line_max_angle_deg` of the
+/// trajectory and no wider than `line_max_width_m`. A far lane's 6 m dash is often seen
+/// as one scan row's 5–9 returns; alone that is noise, in a row along a lane line it is
+/// the line (`vectorize::assemble` keeps fragments only there).
+pub fn is_line_fragment(c: &Candidate, d: Option<DropReason>, p: &Params) -> bool {
+    d == Some(DropReason::Tiny)
+        && c.line.is_some()
+        && c.shape.point_count >= 4
+        && c.shape.length_m >= 0.3
+        && c.shape.angle_to_trajectory_deg <= p.line_max_angle_deg
+        && c.shape.width_m <= p.line_max_width_m
 }
 
 /// Like [`run`] but also returns the dropped candidates with the reason.

@@ -106,6 +106,12 @@ pub fn plan_with_designs(spans: &[Span], designs: &[Design], fill_max: usize) ->
     if own.period > 0.0 {
         return own;
     }
+    plan_on_designs(spans, designs, fill_max)
+}
+
+/// The plan of a line on the one of `designs` its dashes fit best (module docs), ignoring
+/// any design of its own; an empty plan (period 0) when none fits.
+pub fn plan_on_designs(spans: &[Span], designs: &[Design], fill_max: usize) -> Plan {
     // The design most dashes share a phase on (then the tightest phase).
     let mut best: Option<(Design, PhaseFit)> = None;
     for &d in designs {
@@ -123,7 +129,7 @@ pub fn plan_with_designs(spans: &[Span], designs: &[Design], fill_max: usize) ->
     }
     match best {
         Some((d, fit)) => apply(spans, d, fit.anchors, fill_max),
-        None => own,
+        None => Plan::default(),
     }
 }
 
@@ -160,11 +166,12 @@ fn own_design(spans: &[Span]) -> Option<(Design, Vec<(f64, f64)>)> {
     }
     let period = median(&mut units);
     let tol_p = period_tolerance(period);
+    // A spacing of many periods proves nothing once its tolerance nears a quarter period.
     let regular = diffs
         .iter()
         .filter(|&&d| {
             let n = (d / period).round();
-            n >= 1.0 && (d - n * period).abs() <= tol_p * n
+            n >= 1.0 && tol_p * n < 0.25 * period && (d - n * period).abs() <= tol_p * n
         })
         .count();
     if (regular as f64) < 0.7 * diffs.len() as f64 {
@@ -506,5 +513,19 @@ mod tests {
             .collect();
         let p = plan_with_designs(&other_period, &[design, other], 1);
         assert!(p.extend.is_empty() && p.fill.is_empty(), "{p:?}");
+    }
+
+    /// Fragments 1 m apart among ones ~15 m apart make no 1 m "period": a spacing of many
+    /// periods proves nothing once its tolerance nears a quarter period.
+    #[test]
+    fn a_tiny_spacing_is_no_period_for_far_apart_dashes() {
+        let s: Vec<Span> = [0.0, 1.0, 15.3, 29.1, 46.0, 61.2]
+            .iter()
+            .enumerate()
+            .map(|(i, &a)| span(i, a, a + 0.6))
+            .collect();
+        let p = plan(&s, 1);
+        assert_eq!(p.period, 0.0, "{p:?}");
+        assert!(p.extend.is_empty() && p.fill.is_empty());
     }
 }

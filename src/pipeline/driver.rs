@@ -756,12 +756,17 @@ fn finish_clusters(
     }
     drop(complete);
     // The classifier's reference line only needs the trajectory around these clusters.
-    let mut candidates = classify::run(&cloud, &clusters, traj, &p.classify);
+    let (mut candidates, fragments) = classify::run_with_fragments(&cloud, &clusters, traj, &p.classify);
     // The learned classifier takes the candidates the geometric rules could not decide.
     super::learned::refine(&mut candidates, &cloud, &p.learned)?;
     ctx.stats.add(5, t0);
     let t0 = Instant::now();
-    let pieces = vectorize::outlines(&cloud, &candidates, &p.vectorize);
+    let mut pieces = vectorize::outlines(&cloud, &candidates, &p.vectorize);
+    pieces.extend(
+        vectorize::outlines(&cloud, &fragments, &p.vectorize)
+            .into_iter()
+            .map(|q| vectorize::Piece { fragment: true, ..q }),
+    );
     ctx.stats.add(6, t0);
     Ok(pieces)
 }

@@ -26,7 +26,10 @@
 //! line (`stoplines`); "stop lines" across the road that a lane line runs on through made
 //! `unknown`; lane-line growth with crosswalks and stop lines as barriers; bars across the
 //! road wholly beyond the outermost lane line on their side (a side street's centre line,
-//! dashes, crossing stripes) made `unknown`; line pieces whose width the points do not
+//! dashes, crossing stripes) made `unknown`; lane lines of line fragments alone (pieces
+//! flagged [`Piece::fragment`], too small for markings: a far lane's dashes seen as one
+//! scan row each) where they fall on the drive's dash design (`fragment_lines`), other
+//! fragments dropped; line pieces whose width the points do not
 //! resolve widened to their lane line's width; gaps of solid lane lines bridged (short
 //! ones always, long ones between longer pieces, and up to `lane_lines.max_unseen_gap_m`
 //! where the scanner saw no bare asphalt on the gap's course); dashes put on their line's design
@@ -164,6 +167,10 @@ pub struct Piece {
     /// 0.15 m line with one return), so the measured width under-reads the paint. See
     /// [`widen_undersampled`].
     pub undersampled: Option<f64>,
+    /// A line fragment too small to stand as a marking (a far line's dash seen as a few
+    /// returns of one scan row): it only counts where it joins a lane line, and is dropped
+    /// otherwise (see [`assemble`]).
+    pub fragment: bool,
 }
 
 /// Heading in degrees clockwise from north of direction `d` (x east, y north), in [0, 360).
@@ -301,6 +308,7 @@ pub fn outlines(cloud: &PointCloud, candidates: &[Candidate], params: &Params) -
                 },
                 undersampled: undersampled.filter(|_| centerline.is_some()),
                 centerline,
+                fragment: false,
             })
         })
         .collect()
@@ -477,6 +485,7 @@ fn bridge(a: &Piece, b: &Piece, lane: &[[f64; 2]], max_gap: f64) -> Option<Piece
         },
         centerline: Some(line),
         undersampled: None,
+        fragment: false,
     })
 }
 
@@ -503,6 +512,11 @@ fn gap_limit(a: &Piece, b: &Piece, params: &Params) -> f64 {
 
 /// Station (distance along `lane` from its first vertex) of the point of `lane` nearest `p`.
 fn station_on(lane: &[[f64; 2]], p: [f64; 2]) -> f64 {
+    locate_on(lane, p).1
+}
+
+/// Distance (m) from `p` to the polyline `lane` and the station of the nearest point.
+fn locate_on(lane: &[[f64; 2]], p: [f64; 2]) -> (f64, f64) {
     let d = |p: [f64; 2], q: [f64; 2]| (p[0] - q[0]).hypot(p[1] - q[1]);
     let mut best = (f64::INFINITY, 0.0);
     let mut s0 = 0.0;
@@ -520,7 +534,24 @@ fn station_on(lane: &[[f64; 2]], p: [f64; 2]) -> f64 {
         }
         s0 += len;
     }
-    best.1
+    best
+}
+
+/// How close (m) a piece's ends and middle come to a lane line for it to lie on that line.
+const FRAGMENT_TOLERANCE_M: f64 = 0.15;
+/// Pieces this close (m) to a lane line are that line's, never part of a line of fragments.
+const FRAGMENT_EXCLUSION_M: f64 = 0.3;
+
+/// Whether the piece's centreline (ends and middle) lies within `tol` of a lane line, within
+/// the line's extent.
+fn on_a_lane_line(lines: &[lanes::LaneResult], lengths: &[f64], cl: &[[f64; 2]], tol: f64) -> bool {
+    let probes = [cl[0], cl[cl.len() / 2], cl[cl.len() - 1]];
+    lines.iter().zip(lengths).any(|(l, &len)| {
+        probes.iter().all(|&q| {
+            let (d, st) = locate_on(&l.line, q);
+            d <= tol && st > 0.0 && st < len
+        })
+    })
 }
 
 /// The part of `lane` between stations `a < b` (clamped to the line): the point at `a`, the
@@ -553,6 +584,250 @@ fn sub_line(lane: &[[f64; 2]], a: f64, b: f64) -> Vec<[f64; 2]> {
     out
 }
 
+/// The dashes of a lane line as spans along it.
+fn dash_spans(l: &lanes::LaneResult, pieces: &[Piece]) -> Vec<dashes::Span> {
+    l.pieces
+        .iter()
+        .filter(|&&k| pieces[k].marking.class == MarkingClass::DashedLine)
+        .filter_map(|&k| {
+            let cl = pieces[k].centerline.as_ref()?;
+            let st: Vec<f64> = cl.iter().map(|&q| station_on(&l.line, q)).collect();
+            let a = st.iter().copied().fold(f64::INFINITY, f64::min);
+            let b = st.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            Some(dashes::Span {
+                key: k,
+                a,
+                b,
+                width: pieces[k].marking.width_m,
+                confidence: pieces[k].marking.confidence,
+            })
+        })
+        .collect()
+}
+
+/// Lane lines of line fragments alone (written here: the lane-line growth extrapolates each
+/// piece's direction, which a few returns of one scan row do not fix). The fragments and
+/// the dashes on no lane line and not within `FRAGMENT_EXCLUSION_M` of one are chained in
+/// the trajectory frame, each to the nearest piece ahead (within
+/// `FRAGMENT_LINE_MAX_GAP_M`) whose offset differs by at most `FRAGMENT_CHAIN_TOLERANCE_M`
+/// plus 0.5 % of the gap, mutual choices only. A chain of at least `FRAGMENT_LINE_MIN` pieces
+/// over at least `FRAGMENT_LINE_MIN_LENGTH_M` becomes a lane line: its pieces' offsets
+/// smoothed over `FRAGMENT_LINE_SMOOTHING_M`, refitted without pieces off it by more than
+/// `FRAGMENT_TOLERANCE_M`. It is kept, dashed, only where its pieces fall on one phase of
+/// a lane-line dash design of the drive's other dashed lines (dashes at most
+/// `FRAGMENT_DESIGN_MAX_WIDTH_M` wide, the design of the most lane-line length tried
+/// first; see [`dashes::plan_on_designs`]), at least half of them are placed on painted
+/// dashes and the line spans at least 5 periods. A far lane's dashes seen as one scan row
+/// each make such a line; scattered bright returns (a verge, sealant) and a far solid
+/// line's fragments fall on no phase and make none.
+fn fragment_lines(
+    lanes: &mut lanes::Lanes,
+    pieces: &mut [Piece],
+    first: usize,
+    refl: &RefLine,
+    params: &Params,
+) {
+    let mut joined = vec![false; pieces.len()];
+    for l in &lanes.lines {
+        for &k in &l.pieces {
+            joined[k] = true;
+        }
+    }
+    // (s, o) of the middle of each free piece: on no lane line, and not beside one (the
+    // fragments of a far solid line whose pieces made a lane line are that line's).
+    let lengths: Vec<f64> = lanes
+        .lines
+        .iter()
+        .map(|l| geom::polyline_length(&l.line))
+        .collect();
+    let mut free: Vec<(f64, f64, usize)> = (0..pieces.len())
+        .filter(|&k| !joined[k] && (k >= first || pieces[k].marking.class == MarkingClass::DashedLine))
+        .filter_map(|k| {
+            let cl = pieces[k].centerline.as_ref().filter(|c| c.len() >= 2)?;
+            if on_a_lane_line(&lanes.lines, &lengths, cl, FRAGMENT_EXCLUSION_M) {
+                return None;
+            }
+            let so = refl.locate(cl[cl.len() / 2]);
+            Some((so[0], so[1], k))
+        })
+        .collect();
+    if free.len() < FRAGMENT_LINE_MIN {
+        return;
+    }
+    let fill_max = params.fill_missing_dashes as usize;
+    // Lane-line designs (dashes at most FRAGMENT_DESIGN_MAX_WIDTH_M wide), the design of
+    // the most lane-line length first: a far lane repeats the road's common design, not a
+    // wide transition line's.
+    let mut designs: Vec<(dashes::Design, f64)> = lanes
+        .lines
+        .iter()
+        .filter(|l| l.class == LaneLineClass::DashedLine && l.line.len() >= 2)
+        .filter_map(|l| {
+            Some((
+                dashes::plan(&dash_spans(l, pieces), fill_max).design()?,
+                l.length_m,
+            ))
+        })
+        .filter(|(d, _)| d.width <= FRAGMENT_DESIGN_MAX_WIDTH_M)
+        .collect();
+    let same = |a: &dashes::Design, b: &dashes::Design| {
+        (a.period - b.period).abs() <= 0.05 * a.period
+            && (a.dash_length - b.dash_length).abs() <= 0.1 * a.dash_length
+    };
+    let mut weighted: Vec<(dashes::Design, f64)> = Vec::new();
+    for (d, len) in designs.drain(..) {
+        match weighted.iter_mut().find(|(w, _)| same(w, &d)) {
+            Some(w) => w.1 += len,
+            None => weighted.push((d, len)),
+        }
+    }
+    weighted.sort_by(|a, b| b.1.total_cmp(&a.1));
+    if weighted.is_empty() {
+        return;
+    }
+    free.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.2.cmp(&b.2)));
+    let n = free.len();
+    // Each piece's best next piece ahead, then mutual choices.
+    let tol = |gap: f64| FRAGMENT_CHAIN_TOLERANCE_M + 0.005 * gap;
+    let next: Vec<Option<usize>> = (0..n)
+        .map(|i| {
+            let (s, o, _) = free[i];
+            (i + 1..n)
+                .take_while(|&j| free[j].0 - s <= FRAGMENT_LINE_MAX_GAP_M)
+                .filter(|&j| free[j].0 - s > 0.3 && (free[j].1 - o).abs() <= tol(free[j].0 - s))
+                .min_by(|&x, &y| {
+                    let c = |j: usize| {
+                        (free[j].1 - o).abs() / tol(free[j].0 - s) + (free[j].0 - s) / FRAGMENT_LINE_MAX_GAP_M
+                    };
+                    c(x).total_cmp(&c(y))
+                })
+        })
+        .collect();
+    let mut prev: Vec<Option<usize>> = vec![None; n];
+    for i in 0..n {
+        if let Some(j) = next[i] {
+            // The piece j takes the nearest-in-offset of the pieces choosing it.
+            let better =
+                prev[j].is_none_or(|p| (free[i].1 - free[j].1).abs() < (free[p].1 - free[j].1).abs());
+            if better {
+                prev[j] = Some(i);
+            }
+        }
+    }
+    let mut taken = vec![false; n];
+    for start in 0..n {
+        if prev[start].is_some() || taken[start] {
+            continue;
+        }
+        let mut chain = vec![start];
+        let mut i = start;
+        while let Some(j) = next[i].filter(|&j| prev[j] == Some(i) && !taken[j]) {
+            chain.push(j);
+            i = j;
+        }
+        for &i in &chain {
+            taken[i] = true;
+        }
+        let (s0, s1) = (free[chain[0]].0, free[chain[chain.len() - 1]].0);
+        if chain.len() < FRAGMENT_LINE_MIN || s1 - s0 < FRAGMENT_LINE_MIN_LENGTH_M {
+            continue;
+        }
+        // The line: the members' centreline vertices smoothed over FRAGMENT_LINE_SMOOTHING_M,
+        // refitted without the members whose median residual exceeds FRAGMENT_TOLERANCE_M
+        // (a chain can pick up a stray fragment); a vertex every metre.
+        let mut keys: Vec<usize> = chain.iter().map(|&i| free[i].2).collect();
+        let samples = |keys: &[usize]| -> (Vec<f64>, Vec<f64>, Vec<usize>) {
+            let mut v: Vec<(f64, f64, usize)> = keys
+                .iter()
+                .flat_map(|&k| {
+                    let cl = pieces[k].centerline.as_deref().unwrap_or(&[]);
+                    cl.iter().map(move |&q| {
+                        let so = refl.locate(q);
+                        (so[0], so[1], k)
+                    })
+                })
+                .collect();
+            v.sort_by(|a, b| a.0.total_cmp(&b.0));
+            (
+                v.iter().map(|t| t.0).collect(),
+                v.iter().map(|t| t.1).collect(),
+                v.iter().map(|t| t.2).collect(),
+            )
+        };
+        let (xs, ys, owner) = samples(&keys);
+        let ws = vec![1.0; xs.len()];
+        let fit = |xs: &[f64], ys: &[f64], ws: &[f64], st: f64| {
+            geom::local_linear(xs, ys, ws, st, FRAGMENT_LINE_SMOOTHING_M, 3.0).map_or(ys[0], |f| f.0)
+        };
+        keys.retain(|&k| {
+            let mut r: Vec<f64> = (0..xs.len())
+                .filter(|&i| owner[i] == k)
+                .map(|i| (ys[i] - fit(&xs, &ys, &ws, xs[i])).abs())
+                .collect();
+            !r.is_empty() && geom::median(&mut r) <= FRAGMENT_TOLERANCE_M
+        });
+        if keys.len() < FRAGMENT_LINE_MIN {
+            continue;
+        }
+        let (xs, ys, _) = samples(&keys);
+        let ws = vec![1.0; xs.len()];
+        let (a, b) = (xs[0] - 3.0, xs[xs.len() - 1] + 3.0);
+        let nv = (b - a).ceil().max(1.0) as usize;
+        let line: Vec<[f64; 2]> = (0..=nv)
+            .map(|v| {
+                let st = a + (b - a) * v as f64 / nv as f64;
+                refl.point(st, fit(&xs, &ys, &ws, st))
+            })
+            .collect();
+        let mut l = lanes::LaneResult {
+            class: LaneLineClass::DashedLine,
+            length_m: geom::polyline_length(&line),
+            start: refl.locate(line[0]),
+            line,
+            confidence: FRAGMENT_CONFIDENCE_LINE,
+            pieces: keys,
+        };
+        for &k in &l.pieces {
+            pieces[k].marking.class = MarkingClass::DashedLine;
+        }
+        let spans = dash_spans(&l, pieces);
+        // The first design (most length first) the pieces fit over at least 5 periods.
+        let plan = weighted
+            .iter()
+            .map(|(d, _)| dashes::plan_on_designs(&spans, &[*d], fill_max))
+            .find(|p| p.period > 0.0 && 2 * p.extend.len() >= spans.len() && l.length_m >= 5.0 * p.period)
+            .unwrap_or_default();
+        if plan.period <= 0.0 || 2 * plan.extend.len() < spans.len() {
+            continue;
+        }
+        l.line = geom::simplify(&l.line, params.lane_lines.simplify_tolerance_m);
+        lanes
+            .classes
+            .extend(l.pieces.iter().map(|&k| (k, MarkingClass::DashedLine)));
+        lanes.lines.push(l);
+    }
+    lanes.classes.sort_unstable_by_key(|c| c.0);
+}
+
+/// Bandwidth (m) of a line of fragments' offset fit: a far fragment is a few returns of
+/// one scan row, centimetres off the paint's axis, so the line averages several.
+const FRAGMENT_LINE_SMOOTHING_M: f64 = 25.0;
+/// Confidence of a lane line of fragments.
+const FRAGMENT_CONFIDENCE_LINE: f64 = 0.4;
+/// Longest gap (m) between consecutive pieces of a line of fragments (two 15 m periods of
+/// a highway dashed line with a dash unseen).
+const FRAGMENT_LINE_MAX_GAP_M: f64 = 40.0;
+/// Widest dashes (m) of a design a line of fragments may take.
+const FRAGMENT_DESIGN_MAX_WIDTH_M: f64 = 0.3;
+/// Offset difference (m) allowed between consecutive pieces of a line of fragments, plus
+/// 0.5 % of their gap: a far fragment's middle is a few returns of one row, centimetres to
+/// a decimetre off the paint's axis.
+const FRAGMENT_CHAIN_TOLERANCE_M: f64 = 0.3;
+
+/// Fragments a line of fragments alone needs, and its least length (m).
+const FRAGMENT_LINE_MIN: usize = 8;
+const FRAGMENT_LINE_MIN_LENGTH_M: f64 = 40.0;
+
 /// Dashes of the dashed lane lines put on their line's design (see [`super::dashes`]):
 /// short dashes that fit the pattern get their painted extent, and up to
 /// `fill_missing_dashes` missing dashes in a row are added (confidence halved, no points).
@@ -564,33 +839,19 @@ fn regularise_dashes(pieces: &mut [Piece], lines: &[lanes::LaneResult], params: 
         .iter()
         .filter(|l| l.class == LaneLineClass::DashedLine && l.line.len() >= 2)
         .collect();
-    let spans_of = |l: &lanes::LaneResult, pieces: &[Piece]| -> Vec<dashes::Span> {
-        l.pieces
-            .iter()
-            .filter(|&&k| pieces[k].marking.class == MarkingClass::DashedLine)
-            .filter_map(|&k| {
-                let cl = pieces[k].centerline.as_ref()?;
-                let st: Vec<f64> = cl.iter().map(|&q| station_on(&l.line, q)).collect();
-                let a = st.iter().copied().fold(f64::INFINITY, f64::min);
-                let b = st.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-                Some(dashes::Span {
-                    key: k,
-                    a,
-                    b,
-                    width: pieces[k].marking.width_m,
-                    confidence: pieces[k].marking.confidence,
-                })
-            })
-            .collect()
-    };
-    let all_spans: Vec<Vec<dashes::Span>> = dashed.iter().map(|l| spans_of(l, pieces)).collect();
+    let all_spans: Vec<Vec<dashes::Span>> = dashed.iter().map(|l| dash_spans(l, pieces)).collect();
     let own: Vec<dashes::Plan> = all_spans.iter().map(|sp| dashes::plan(sp, fill_max)).collect();
     let designs: Vec<dashes::Design> = own.iter().filter_map(dashes::Plan::design).collect();
     let mut added = Vec::new();
     for ((l, spans), own) in dashed.into_iter().zip(&all_spans).zip(own) {
         let total = geom::polyline_length(&l.line);
+        // A line of fragments adds no dashes where none was seen: its course is known to a
+        // decimetre, a painted dash's width is 0.15 m.
+        let of_fragments = l.pieces.iter().any(|&k| pieces[k].fragment);
         let plan = if own.period > 0.0 {
             own
+        } else if of_fragments {
+            dashes::plan_with_designs(spans, &designs, 0)
         } else {
             dashes::plan_with_designs(spans, &designs, fill_max)
         };
@@ -609,6 +870,7 @@ fn regularise_dashes(pieces: &mut [Piece], lines: &[lanes::LaneResult], params: 
             let Some((line, ring)) = make(a, b, width) else {
                 continue;
             };
+            pieces[k].fragment = false;
             let m = &mut pieces[k].marking;
             m.outline = ring;
             m.length_m = geom::polyline_length(&line);
@@ -636,6 +898,7 @@ fn regularise_dashes(pieces: &mut [Piece], lines: &[lanes::LaneResult], params: 
                 },
                 centerline: Some(line),
                 undersampled: None,
+                fragment: false,
             });
         }
     }
@@ -692,6 +955,7 @@ fn regularise_crosswalks(mut pieces: Vec<Piece>, refl: &RefLine, fill_max: usize
             },
             centerline: None,
             undersampled: None,
+            fragment: false,
         });
     }
     without(pieces, removed)
@@ -981,6 +1245,8 @@ pub fn assemble(
     seen: Option<&Lookup<'_>>,
 ) -> (Vec<Marking>, Vec<LaneLine>) {
     let refl = RefLine::new(traj_abs);
+    // Line fragments only take part in the lane lines (module docs).
+    let (fragments, pieces): (Vec<Piece>, Vec<Piece>) = pieces.into_iter().partition(|p| p.fragment);
     let pieces = if params.regularize_crosswalks {
         regularise_crosswalks(pieces, &refl, params.fill_missing_stripes as usize)
     } else {
@@ -1013,10 +1279,26 @@ pub fn assemble(
         .filter(|p| matches!(p.marking.class, MarkingClass::StopLine | MarkingClass::Crosswalk))
         .map(|p| p.marking.outline.clone())
         .collect();
-    let lanes = lanes::grow_with_barriers(&lane_pieces, traj_abs, &params.lane_lines, &barriers, seen);
+    let mut lanes = lanes::grow_with_barriers(&lane_pieces, traj_abs, &params.lane_lines, &barriers, seen);
     let mut pieces = pieces;
+    let first_fragment = pieces.len();
+    pieces.extend(fragments);
+    fragment_lines(&mut lanes, &mut pieces, first_fragment, &refl, params);
     for &(k, class) in &lanes.classes {
         pieces[k].marking.class = class;
+    }
+    // Fragments outside the lane lines are dropped (at the end, so keys stay put).
+    let mut dropped = vec![false; pieces.len()];
+    {
+        let mut in_lane = vec![false; pieces.len()];
+        for l in &lanes.lines {
+            for &k in &l.pieces {
+                in_lane[k] = true;
+            }
+        }
+        for k in first_fragment..pieces.len() {
+            dropped[k] = !in_lane[k];
+        }
     }
     stop_lines_beyond_edges(&mut pieces, &lanes.lines, &refl);
     if params.isolated_dashes_unknown {
@@ -1064,10 +1346,24 @@ pub fn assemble(
         let added = regularise_dashes(&mut pieces, &lanes.lines, params);
         pieces.extend(added);
     }
+    // A fragment of a dashed line that was not placed on a painted dash is dropped too (it
+    // says where the line runs, not where its paint is).
+    for (k, p) in pieces
+        .iter()
+        .enumerate()
+        .skip(first_fragment)
+        .take(dropped.len() - first_fragment)
+    {
+        if p.fragment && p.marking.class == MarkingClass::DashedLine {
+            dropped[k] = true;
+        }
+    }
     // Driving order: station of the outline's vertex mean on the absolute reference line.
+    dropped.resize(pieces.len(), false);
     let mut order: Vec<(f64, f64, usize)> = pieces
         .iter()
         .enumerate()
+        .filter(|&(k, _)| !dropped[k])
         .map(|(k, p)| {
             let n = p.marking.outline.len().max(1) as f64;
             let c = p
@@ -1104,7 +1400,12 @@ pub fn assemble(
             line: l.line,
             confidence: l.confidence,
             length_m: l.length_m,
-            marking_ids: l.pieces.iter().map(|&k| id_of[k].clone()).collect(),
+            marking_ids: l
+                .pieces
+                .iter()
+                .filter(|&&k| !dropped[k])
+                .map(|&k| id_of[k].clone())
+                .collect(),
         })
         .collect();
     let mut slots: Vec<Option<Piece>> = pieces.into_iter().map(Some).collect();
@@ -1193,6 +1494,7 @@ mod tests {
             },
             centerline: Some(vec![[x0, 0.0], [x1, 0.0]]),
             undersampled: None,
+            fragment: false,
         }
     }
 
@@ -1220,6 +1522,7 @@ mod tests {
             },
             centerline: None,
             undersampled: None,
+            fragment: false,
         }
     }
 
@@ -1413,5 +1716,71 @@ mod tests {
         let bare = crate::pipeline::observed::test_seen_except(&traj, 3.5, |_| false);
         let (marks, lines) = assemble(pieces(), &traj, &p, Some(&bare.lookup()));
         assert_eq!((marks.len(), lines.len()), (2, 2));
+    }
+
+    /// A line fragment: a thin 0.6 m piece from `x0` at offset `y`.
+    fn fragment(x0: f64, y: f64) -> Piece {
+        let mut p = shifted(solid(x0, x0 + 0.6), y);
+        p.marking.class = MarkingClass::DashedLine;
+        p.marking.width_m = 0.03;
+        p.marking.outline = outline::buffered_line(&[[x0, y], [x0 + 0.6, y]], 0.015);
+        p.marking.confidence = 0.3;
+        p.marking.point_count = 6;
+        p.fragment = true;
+        p
+    }
+
+    /// Two near dashed lines (6 m dashes every 15 m) give the drive's design. A far line
+    /// seen only as one 0.6 m fragment per dash, at varying places in it, becomes a dashed
+    /// lane line whose fragments are put on the painted dashes; a row of fragments at one
+    /// offset that follows no period (a verge's bright returns) makes no line, and its
+    /// fragments are dropped.
+    #[test]
+    fn a_far_line_seen_as_fragments_is_put_on_the_drive_design() {
+        let traj = crate::pipeline::types::test_straight_trajectory(300, -20.0);
+        let mut pieces = Vec::new();
+        for k in 0..18 {
+            let x0 = 3.0 + 15.0 * k as f64;
+            for y in [-1.8, 1.8] {
+                let mut d = shifted(solid(x0, x0 + 6.0), y);
+                d.marking.class = MarkingClass::DashedLine;
+                pieces.push(d);
+            }
+        }
+        let inside = [
+            0.2, 2.5, 5.0, 1.0, 4.2, 3.3, 0.6, 5.2, 2.0, 3.9, 1.5, 4.8, 0.9, 2.8, 5.3, 1.8,
+        ];
+        for (k, &at) in inside.iter().enumerate() {
+            pieces.push(fragment(3.0 + 15.0 * k as f64 + at, 22.75));
+        }
+        for k in 0..12 {
+            pieces.push(fragment(16.25 * k as f64, 18.0));
+        }
+        let (marks, lines) = assemble(pieces, &traj, &Params::default(), None);
+        let centre_y = |m: &Marking| m.outline.iter().map(|q| q[1]).sum::<f64>() / m.outline.len() as f64;
+        let far: Vec<&Marking> = marks
+            .iter()
+            .filter(|m| (centre_y(m) - 22.75).abs() < 0.3)
+            .collect();
+        let placed = far
+            .iter()
+            .filter(|m| m.class == MarkingClass::DashedLine && (m.length_m - 6.0).abs() < 0.3)
+            .count();
+        assert!(placed >= 14, "{placed} far dashes put on the design: {far:?}");
+        let far_line = lines
+            .iter()
+            .find(|l| l.line.iter().all(|q| (q[1] - 22.75).abs() < 0.1))
+            .expect("a lane line of the far fragments");
+        assert_eq!(far_line.class, LaneLineClass::DashedLine);
+        assert!(far_line.length_m > 200.0, "{}", far_line.length_m);
+        assert!(
+            marks.iter().all(|m| (centre_y(m) - 18.0).abs() > 0.5),
+            "the fragments off any period are dropped"
+        );
+        assert!(
+            lines
+                .iter()
+                .all(|l| l.line.iter().all(|q| (q[1] - 18.0).abs() > 0.5))
+        );
     }
 }
