@@ -613,7 +613,9 @@ fn dash_spans(l: &lanes::LaneResult, pieces: &[Piece]) -> Vec<dashes::Span> {
 /// plus 0.5 % of the gap, mutual choices only. A chain of at least `FRAGMENT_LINE_MIN` pieces
 /// over at least `FRAGMENT_LINE_MIN_LENGTH_M` becomes a lane line: its pieces' offsets
 /// smoothed over `FRAGMENT_LINE_SMOOTHING_M`, refitted without pieces off it by more than
-/// `FRAGMENT_TOLERANCE_M`. It is kept, dashed, only where its pieces fall on one phase of
+/// `FRAGMENT_TOLERANCE_M`, and dropped if it drifts across the road by more than
+/// `FRAGMENT_PARALLEL_M` relative to the lane line beside it. It is kept, dashed, only
+/// where its pieces fall on one phase of
 /// a lane-line dash design of the drive's other dashed lines (dashes at most
 /// `FRAGMENT_DESIGN_MAX_WIDTH_M` wide, the design of the most lane-line length tried
 /// first; see [`dashes::plan_on_designs`]), at least half of them are placed on painted
@@ -685,6 +687,16 @@ fn fragment_lines(
     if weighted.is_empty() {
         return;
     }
+    // The lane lines' vertices in the trajectory frame, by mileage.
+    let ref_so: Vec<Vec<[f64; 2]>> = lanes
+        .lines
+        .iter()
+        .map(|l| {
+            let mut so: Vec<[f64; 2]> = l.line.iter().map(|&q| refl.locate(q)).collect();
+            so.sort_by(|a, b| a[0].total_cmp(&b[0]));
+            so
+        })
+        .collect();
     free.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.2.cmp(&b.2)));
     let n = free.len();
     // Each piece's best next piece ahead, then mutual choices.
@@ -771,6 +783,32 @@ fn fragment_lines(
         }
         let (xs, ys, _) = samples(&keys);
         let ws = vec![1.0; xs.len()];
+        // Lane lines run side by side: along the overlap with the nearest lane line beside
+        // it (overlapping at least half of it), its offset may change by at most
+        // FRAGMENT_PARALLEL_M more than that line's (a chain that slants across its
+        // neighbour's course picked up the wrong fragments).
+        let (c0, c1) = (xs[0], xs[xs.len() - 1]);
+        let o_mid = fit(&xs, &ys, &ws, 0.5 * (c0 + c1));
+        let beside = ref_so
+            .iter()
+            .filter_map(|so| {
+                let (r0, r1) = (so.first()?[0], so.last()?[0]);
+                let (lo, hi) = (r0.max(c0), r1.min(c1));
+                let at = |st: f64| {
+                    let k = so.partition_point(|q| q[0] < st).clamp(1, so.len() - 1);
+                    let (u, v) = (so[k - 1], so[k]);
+                    u[1] + (v[1] - u[1]) * ((st - u[0]) / (v[0] - u[0]).max(1e-9)).clamp(0.0, 1.0)
+                };
+                (so.len() >= 2 && hi - lo >= 0.5 * (c1 - c0))
+                    .then(|| (lo, hi, at(0.5 * (lo + hi)), at(hi) - at(lo)))
+            })
+            .min_by(|x, y| (x.2 - o_mid).abs().total_cmp(&(y.2 - o_mid).abs()));
+        if let Some((lo, hi, _, drift)) = beside {
+            let own = fit(&xs, &ys, &ws, hi) - fit(&xs, &ys, &ws, lo);
+            if (own - drift).abs() > FRAGMENT_PARALLEL_M {
+                continue;
+            }
+        }
         let (a, b) = (xs[0] - 3.0, xs[xs.len() - 1] + 3.0);
         let nv = (b - a).ceil().max(1.0) as usize;
         let line: Vec<[f64; 2]> = (0..=nv)
@@ -809,6 +847,9 @@ fn fragment_lines(
     lanes.classes.sort_unstable_by_key(|c| c.0);
 }
 
+/// How much more (m) a line of fragments may drift across the road than the lane line
+/// beside it, along their overlap.
+const FRAGMENT_PARALLEL_M: f64 = 0.5;
 /// Bandwidth (m) of a line of fragments' offset fit: a far fragment is a few returns of
 /// one scan row, centimetres off the paint's axis, so the line averages several.
 const FRAGMENT_LINE_SMOOTHING_M: f64 = 25.0;
@@ -1781,6 +1822,58 @@ mod tests {
             lines
                 .iter()
                 .all(|l| l.line.iter().all(|q| (q[1] - 18.0).abs() > 0.5))
+        );
+    }
+
+    /// A row of fragments on the dash pattern that slants across the road (1.2 m over
+    /// 240 m) beside a solid lane line that does not makes no lane line: lane lines run side
+    /// by side. The far line parallel to it still does.
+    #[test]
+    fn a_fragment_row_slanting_across_its_neighbour_makes_no_line() {
+        let traj = crate::pipeline::types::test_straight_trajectory(300, -20.0);
+        let mut pieces = Vec::new();
+        for k in 0..18 {
+            let x0 = 3.0 + 15.0 * k as f64;
+            for y in [-1.8, 1.8] {
+                let mut d = shifted(solid(x0, x0 + 6.0), y);
+                d.marking.class = MarkingClass::DashedLine;
+                pieces.push(d);
+            }
+        }
+        for k in 0..9 {
+            pieces.push(shifted(solid(30.0 * k as f64, 30.0 * k as f64 + 29.0), 12.0));
+        }
+        let inside = [
+            0.2, 2.5, 5.0, 1.0, 4.2, 3.3, 0.6, 5.2, 2.0, 3.9, 1.5, 4.8, 0.9, 2.8, 5.3, 1.8,
+        ];
+        for (k, &at) in inside.iter().enumerate() {
+            let x = 3.0 + 15.0 * k as f64 + at;
+            pieces.push(fragment(x, 22.75));
+            pieces.push(fragment(x, 9.0 + 0.005 * x));
+        }
+        let (marks, lines) = assemble(pieces, &traj, &Params::default(), None);
+        let centre = |m: &Marking| {
+            let n = m.outline.len() as f64;
+            m.outline
+                .iter()
+                .fold([0.0, 0.0], |a, q| [a[0] + q[0] / n, a[1] + q[1] / n])
+        };
+        assert!(
+            marks.iter().all(|m| {
+                let c = centre(m);
+                (c[1] - (9.0 + 0.005 * c[0])).abs() > 0.3
+            }),
+            "nothing along the slanting row"
+        );
+        assert!(
+            lines
+                .iter()
+                .any(|l| l.line.iter().all(|q| (q[1] - 22.75).abs() < 0.1))
+        );
+        assert!(
+            !lines
+                .iter()
+                .any(|l| l.line.iter().all(|q| (q[1] - (9.0 + 0.005 * q[0])).abs() < 0.3))
         );
     }
 }
