@@ -314,7 +314,7 @@ pub fn run_with_fragments(
     for (mut c, d) in assess(cloud, clusters, traj, params) {
         match d {
             None => kept.push(c),
-            Some(_) if is_line_fragment(&c, d, params) => {
+            Some(DropReason::Tiny) if is_line_fragment(&c, params) => {
                 c.class = MarkingClass::DashedLine;
                 c.confidence = FRAGMENT_CONFIDENCE;
                 fragments.push(c);
@@ -328,14 +328,13 @@ pub fn run_with_fragments(
 /// Confidence of a line fragment that joins a lane line.
 pub const FRAGMENT_CONFIDENCE: f64 = 0.3;
 
-/// A cluster too small to stand as a marking that is still a piece of a line along the
-/// road: at least 4 returns over at least 0.3 m, within `line_max_angle_deg` of the
-/// trajectory and no wider than `line_max_width_m`. A far lane's 6 m dash is often seen
+/// Whether a cluster dropped as too small ([`DropReason::Tiny`]) is still a piece of a line
+/// along the road: at least 4 returns over at least 0.3 m, within `line_max_angle_deg` of
+/// the trajectory and no wider than `line_max_width_m`. A far lane's 6 m dash is often seen
 /// as one scan row's 5–9 returns; alone that is noise, in a row along a lane line it is
 /// the line (`vectorize::assemble` keeps fragments only there).
-pub fn is_line_fragment(c: &Candidate, d: Option<DropReason>, p: &Params) -> bool {
-    d == Some(DropReason::Tiny)
-        && c.line.is_some()
+pub fn is_line_fragment(c: &Candidate, p: &Params) -> bool {
+    c.line.is_some()
         && c.shape.point_count >= 4
         && c.shape.length_m >= 0.3
         && c.shape.angle_to_trajectory_deg <= p.line_max_angle_deg

@@ -48,12 +48,13 @@
 //!    need twice `min_dashes`, since a sparse solid line shows the same long run among
 //!    short fragments. With `split_on_class_change`, a
 //!    chain that is solid for ≥ `min_length_m` and dashed elsewhere becomes two lane lines.
-//! 4. **Smooth centreline**: offset(s) by Gaussian local linear regression (bandwidth
-//!    `smoothing_m`; on a dashed line 1, 2, 4 or 8 × it, chosen by leave-one-dash-out
-//!    cross-validation, so a far line's dashes, each a few centimetres off, are averaged
-//!    with their neighbours while a bending line keeps the narrow fit) over the pieces' samples; across gaps wider than the bandwidth a cubic
-//!    Hermite joins the fitted ends (values and slopes, fitted over a quarter of the gap,
-//!    2–10 m), so the line follows the road's curvature through occlusions. Sampled every `vertex_spacing_m`, mapped back through
+//! 4. **Smooth centreline**: offset(s) by Gaussian local linear regression over the pieces'
+//!    samples, bandwidth `smoothing_m` (on a dashed line 1, 2, 4 or 8 × it, chosen by
+//!    leave-one-dash-out cross-validation: a far line's dashes, each a few centimetres off,
+//!    are averaged with their neighbours while a bending line keeps the narrow fit); across
+//!    gaps wider than the bandwidth a cubic Hermite joins the fitted ends (values and
+//!    slopes, fitted over a quarter of the gap, 2–10 m, never less than the bandwidth), so
+//!    the line follows the road's curvature through occlusions. Sampled every `vertex_spacing_m`, mapped back through
 //!    the reference frame and simplified (Douglas–Peucker, `simplify_tolerance_m`).
 //! 5. Lane lines shorter than `min_length_m` or whose pieces cover less than
 //!    `min_paint_share` of their length, and single pieces that are not solid, are

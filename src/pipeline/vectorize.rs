@@ -537,19 +537,14 @@ fn locate_on(lane: &[[f64; 2]], p: [f64; 2]) -> (f64, f64) {
     best
 }
 
-/// How close (m) a piece's ends and middle come to a lane line for it to lie on that line.
-const FRAGMENT_TOLERANCE_M: f64 = 0.15;
-/// Pieces this close (m) to a lane line are that line's, never part of a line of fragments.
-const FRAGMENT_EXCLUSION_M: f64 = 0.3;
-
 /// Whether the piece's centreline (ends and middle) lies within `tol` of a lane line, within
 /// the line's extent.
-fn on_a_lane_line(lines: &[lanes::LaneResult], lengths: &[f64], cl: &[[f64; 2]], tol: f64) -> bool {
+fn on_a_lane_line(lines: &[lanes::LaneResult], cl: &[[f64; 2]], tol: f64) -> bool {
     let probes = [cl[0], cl[cl.len() / 2], cl[cl.len() - 1]];
-    lines.iter().zip(lengths).any(|(l, &len)| {
+    lines.iter().any(|l| {
         probes.iter().all(|&q| {
             let (d, st) = locate_on(&l.line, q);
-            d <= tol && st > 0.0 && st < len
+            d <= tol && st > 0.0 && st < l.length_m
         })
     })
 }
@@ -626,8 +621,9 @@ fn fragment_lines(
     lanes: &mut lanes::Lanes,
     pieces: &mut [Piece],
     first: usize,
+    designs: &[dashes::Design],
     refl: &RefLine,
-    params: &Params,
+    simplify_m: f64,
 ) {
     let mut joined = vec![false; pieces.len()];
     for l in &lanes.lines {
@@ -637,16 +633,11 @@ fn fragment_lines(
     }
     // (s, o) of the middle of each free piece: on no lane line, and not beside one (the
     // fragments of a far solid line whose pieces made a lane line are that line's).
-    let lengths: Vec<f64> = lanes
-        .lines
-        .iter()
-        .map(|l| geom::polyline_length(&l.line))
-        .collect();
     let mut free: Vec<(f64, f64, usize)> = (0..pieces.len())
         .filter(|&k| !joined[k] && (k >= first || pieces[k].marking.class == MarkingClass::DashedLine))
         .filter_map(|k| {
             let cl = pieces[k].centerline.as_ref().filter(|c| c.len() >= 2)?;
-            if on_a_lane_line(&lanes.lines, &lengths, cl, FRAGMENT_EXCLUSION_M) {
+            if on_a_lane_line(&lanes.lines, cl, FRAGMENT_EXCLUSION_M) {
                 return None;
             }
             let so = refl.locate(cl[cl.len() / 2]);
@@ -656,45 +647,23 @@ fn fragment_lines(
     if free.len() < FRAGMENT_LINE_MIN {
         return;
     }
-    let fill_max = params.fill_missing_dashes as usize;
-    // Lane-line designs (dashes at most FRAGMENT_DESIGN_MAX_WIDTH_M wide), the design of
-    // the most lane-line length first: a far lane repeats the road's common design, not a
-    // wide transition line's.
-    let mut designs: Vec<(dashes::Design, f64)> = lanes
-        .lines
+    // A far lane repeats the road's lane-line design, not a wide transition line's.
+    let designs: Vec<dashes::Design> = designs
         .iter()
-        .filter(|l| l.class == LaneLineClass::DashedLine && l.line.len() >= 2)
-        .filter_map(|l| {
-            Some((
-                dashes::plan(&dash_spans(l, pieces), fill_max).design()?,
-                l.length_m,
-            ))
-        })
-        .filter(|(d, _)| d.width <= FRAGMENT_DESIGN_MAX_WIDTH_M)
+        .copied()
+        .filter(|d| d.width <= FRAGMENT_DESIGN_MAX_WIDTH_M)
         .collect();
-    let same = |a: &dashes::Design, b: &dashes::Design| {
-        (a.period - b.period).abs() <= 0.05 * a.period
-            && (a.dash_length - b.dash_length).abs() <= 0.1 * a.dash_length
-    };
-    let mut weighted: Vec<(dashes::Design, f64)> = Vec::new();
-    for (d, len) in designs.drain(..) {
-        match weighted.iter_mut().find(|(w, _)| same(w, &d)) {
-            Some(w) => w.1 += len,
-            None => weighted.push((d, len)),
-        }
-    }
-    weighted.sort_by(|a, b| b.1.total_cmp(&a.1));
-    if weighted.is_empty() {
+    if designs.is_empty() {
         return;
     }
-    // The lane lines' vertices in the trajectory frame, by mileage.
-    let ref_so: Vec<Vec<[f64; 2]>> = lanes
+    // The lane lines' vertices in the trajectory frame: (mileages, offsets) by mileage.
+    let ref_so: Vec<(Vec<f64>, Vec<f64>)> = lanes
         .lines
         .iter()
         .map(|l| {
             let mut so: Vec<[f64; 2]> = l.line.iter().map(|&q| refl.locate(q)).collect();
             so.sort_by(|a, b| a[0].total_cmp(&b[0]));
-            so
+            so.into_iter().map(|q| (q[0], q[1])).unzip()
         })
         .collect();
     free.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.2.cmp(&b.2)));
@@ -791,16 +760,10 @@ fn fragment_lines(
         let o_mid = fit(&xs, &ys, &ws, 0.5 * (c0 + c1));
         let beside = ref_so
             .iter()
-            .filter_map(|so| {
-                let (r0, r1) = (so.first()?[0], so.last()?[0]);
-                let (lo, hi) = (r0.max(c0), r1.min(c1));
-                let at = |st: f64| {
-                    let k = so.partition_point(|q| q[0] < st).clamp(1, so.len() - 1);
-                    let (u, v) = (so[k - 1], so[k]);
-                    u[1] + (v[1] - u[1]) * ((st - u[0]) / (v[0] - u[0]).max(1e-9)).clamp(0.0, 1.0)
-                };
-                (so.len() >= 2 && hi - lo >= 0.5 * (c1 - c0))
-                    .then(|| (lo, hi, at(0.5 * (lo + hi)), at(hi) - at(lo)))
+            .filter_map(|(ms, os)| {
+                let (lo, hi) = (ms.first()?.max(c0), ms.last()?.min(c1));
+                let at = |st: f64| geom::interp_clamped(ms, os, st);
+                (hi - lo >= 0.5 * (c1 - c0)).then(|| (lo, hi, at(0.5 * (lo + hi)), at(hi) - at(lo)))
             })
             .min_by(|x, y| (x.2 - o_mid).abs().total_cmp(&(y.2 - o_mid).abs()));
         if let Some((lo, hi, _, drift)) = beside {
@@ -828,17 +791,10 @@ fn fragment_lines(
         for &k in &l.pieces {
             pieces[k].marking.class = MarkingClass::DashedLine;
         }
-        let spans = dash_spans(&l, pieces);
-        // The first design (most length first) the pieces fit over at least 5 periods.
-        let plan = weighted
-            .iter()
-            .map(|(d, _)| dashes::plan_on_designs(&spans, &[*d], fill_max))
-            .find(|p| p.period > 0.0 && 2 * p.extend.len() >= spans.len() && l.length_m >= 5.0 * p.period)
-            .unwrap_or_default();
-        if plan.period <= 0.0 || 2 * plan.extend.len() < spans.len() {
+        if fragment_plan(&dash_spans(&l, pieces), &designs, l.length_m).is_none() {
             continue;
         }
-        l.line = geom::simplify(&l.line, params.lane_lines.simplify_tolerance_m);
+        l.line = geom::simplify(&l.line, simplify_m);
         lanes
             .classes
             .extend(l.pieces.iter().map(|&k| (k, MarkingClass::DashedLine)));
@@ -847,6 +803,46 @@ fn fragment_lines(
     lanes.classes.sort_unstable_by_key(|c| c.0);
 }
 
+/// The plan of a line of fragments: on the first of `designs` (the most lane-line length
+/// first) its pieces fit with at least half of them placed on painted dashes, over a line
+/// at least 5 periods long; no dashes are filled (where none was seen, a line of fragments
+/// does not know its course to a dash's width). `None` when no design fits.
+fn fragment_plan(spans: &[dashes::Span], designs: &[dashes::Design], length_m: f64) -> Option<dashes::Plan> {
+    designs
+        .iter()
+        .map(|d| dashes::plan_on_designs(spans, std::slice::from_ref(d), 0))
+        .find(|p| p.period > 0.0 && 2 * p.extend.len() >= spans.len() && length_m >= 5.0 * p.period)
+}
+
+/// The dash designs of the drive's dashed lane lines (see [`dashes::plan`]), alike ones
+/// (period within 5 %, dash within 10 %) merged, the design of the most lane-line length
+/// first.
+fn drive_designs(lines: &[lanes::LaneResult], pieces: &[Piece]) -> Vec<dashes::Design> {
+    let mut weighted: Vec<(dashes::Design, f64)> = Vec::new();
+    for l in lines
+        .iter()
+        .filter(|l| l.class == LaneLineClass::DashedLine && l.line.len() >= 2)
+    {
+        let Some(d) = dashes::plan(&dash_spans(l, pieces), 0).design() else {
+            continue;
+        };
+        let alike = |w: &dashes::Design| {
+            (w.period - d.period).abs() <= 0.05 * w.period
+                && (w.dash_length - d.dash_length).abs() <= 0.1 * w.dash_length
+        };
+        match weighted.iter_mut().find(|(w, _)| alike(w)) {
+            Some(w) => w.1 += l.length_m,
+            None => weighted.push((d, l.length_m)),
+        }
+    }
+    weighted.sort_by(|a, b| b.1.total_cmp(&a.1));
+    weighted.into_iter().map(|(d, _)| d).collect()
+}
+
+/// How close (m) a fragment's samples must stay to its line's fit (median residual).
+const FRAGMENT_TOLERANCE_M: f64 = 0.15;
+/// Pieces this close (m) to a lane line are that line's, never part of a line of fragments.
+const FRAGMENT_EXCLUSION_M: f64 = 0.3;
 /// How much more (m) a line of fragments may drift across the road than the lane line
 /// beside it, along their overlap.
 const FRAGMENT_PARALLEL_M: f64 = 0.5;
@@ -874,7 +870,12 @@ const FRAGMENT_LINE_MIN_LENGTH_M: f64 = 40.0;
 /// `fill_missing_dashes` missing dashes in a row are added (confidence halved, no points).
 /// A line with too few complete dashes for a design of its own is tried on the designs of
 /// the drive's other dashed lines. Returns the added pieces.
-fn regularise_dashes(pieces: &mut [Piece], lines: &[lanes::LaneResult], params: &Params) -> Vec<Piece> {
+fn regularise_dashes(
+    pieces: &mut [Piece],
+    lines: &[lanes::LaneResult],
+    designs: &[dashes::Design],
+    params: &Params,
+) -> Vec<Piece> {
     let fill_max = params.fill_missing_dashes as usize;
     let dashed: Vec<&lanes::LaneResult> = lines
         .iter()
@@ -882,19 +883,17 @@ fn regularise_dashes(pieces: &mut [Piece], lines: &[lanes::LaneResult], params: 
         .collect();
     let all_spans: Vec<Vec<dashes::Span>> = dashed.iter().map(|l| dash_spans(l, pieces)).collect();
     let own: Vec<dashes::Plan> = all_spans.iter().map(|sp| dashes::plan(sp, fill_max)).collect();
-    let designs: Vec<dashes::Design> = own.iter().filter_map(dashes::Plan::design).collect();
     let mut added = Vec::new();
     for ((l, spans), own) in dashed.into_iter().zip(&all_spans).zip(own) {
         let total = geom::polyline_length(&l.line);
-        // A line of fragments adds no dashes where none was seen: its course is known to a
-        // decimetre, a painted dash's width is 0.15 m.
+        // A line of fragments is put on the design it was accepted on (`fragment_lines`).
         let of_fragments = l.pieces.iter().any(|&k| pieces[k].fragment);
         let plan = if own.period > 0.0 {
             own
         } else if of_fragments {
-            dashes::plan_with_designs(spans, &designs, 0)
+            fragment_plan(spans, designs, l.length_m).unwrap_or_default()
         } else {
-            dashes::plan_with_designs(spans, &designs, fill_max)
+            dashes::plan_with_designs(spans, designs, fill_max)
         };
         // (centreline, outline) of a dash from station a to b.
         type Drawn = (Vec<[f64; 2]>, Vec<[f64; 2]>);
@@ -1324,22 +1323,18 @@ pub fn assemble(
     let mut pieces = pieces;
     let first_fragment = pieces.len();
     pieces.extend(fragments);
-    fragment_lines(&mut lanes, &mut pieces, first_fragment, &refl, params);
+    // The drive's dash designs, from the lane lines as grown (lines of fragments have none).
+    let designs = drive_designs(&lanes.lines, &pieces);
+    fragment_lines(
+        &mut lanes,
+        &mut pieces,
+        first_fragment,
+        &designs,
+        &refl,
+        params.lane_lines.simplify_tolerance_m,
+    );
     for &(k, class) in &lanes.classes {
         pieces[k].marking.class = class;
-    }
-    // Fragments outside the lane lines are dropped (at the end, so keys stay put).
-    let mut dropped = vec![false; pieces.len()];
-    {
-        let mut in_lane = vec![false; pieces.len()];
-        for l in &lanes.lines {
-            for &k in &l.pieces {
-                in_lane[k] = true;
-            }
-        }
-        for k in first_fragment..pieces.len() {
-            dropped[k] = !in_lane[k];
-        }
     }
     stop_lines_beyond_edges(&mut pieces, &lanes.lines, &refl);
     if params.isolated_dashes_unknown {
@@ -1384,23 +1379,14 @@ pub fn assemble(
         pieces.extend(bridges);
     }
     if params.regularize_dashes {
-        let added = regularise_dashes(&mut pieces, &lanes.lines, params);
+        let added = regularise_dashes(&mut pieces, &lanes.lines, &designs, params);
         pieces.extend(added);
     }
-    // A fragment of a dashed line that was not placed on a painted dash is dropped too (it
-    // says where the line runs, not where its paint is).
-    for (k, p) in pieces
-        .iter()
-        .enumerate()
-        .skip(first_fragment)
-        .take(dropped.len() - first_fragment)
-    {
-        if p.fragment && p.marking.class == MarkingClass::DashedLine {
-            dropped[k] = true;
-        }
-    }
+    // A fragment not placed on a painted dash (`regularise_dashes` clears the flag of those
+    // it places) is dropped: off the lane lines it is noise, on one it says where the line
+    // runs, not where its paint is. At the end, so keys stay put.
+    let dropped: Vec<bool> = pieces.iter().map(|p| p.fragment).collect();
     // Driving order: station of the outline's vertex mean on the absolute reference line.
-    dropped.resize(pieces.len(), false);
     let mut order: Vec<(f64, f64, usize)> = pieces
         .iter()
         .enumerate()
@@ -1771,14 +1757,9 @@ mod tests {
         p
     }
 
-    /// Two near dashed lines (6 m dashes every 15 m) give the drive's design. A far line
-    /// seen only as one 0.6 m fragment per dash, at varying places in it, becomes a dashed
-    /// lane line whose fragments are put on the painted dashes; a row of fragments at one
-    /// offset that follows no period (a verge's bright returns) makes no line, and its
-    /// fragments are dropped.
-    #[test]
-    fn a_far_line_seen_as_fragments_is_put_on_the_drive_design() {
-        let traj = crate::pipeline::types::test_straight_trajectory(300, -20.0);
+    /// Two dashed lines 1.8 m either side of the trajectory, 6 m dashes every 15 m from x = 3
+    /// to 270: the drive's design.
+    fn near_dashed_lines() -> Vec<Piece> {
         let mut pieces = Vec::new();
         for k in 0..18 {
             let x0 = 3.0 + 15.0 * k as f64;
@@ -1788,6 +1769,18 @@ mod tests {
                 pieces.push(d);
             }
         }
+        pieces
+    }
+
+    /// Two near dashed lines (6 m dashes every 15 m) give the drive's design. A far line
+    /// seen only as one 0.6 m fragment per dash, at varying places in it, becomes a dashed
+    /// lane line whose fragments are put on the painted dashes; a row of fragments at one
+    /// offset that follows no period (a verge's bright returns) makes no line, and its
+    /// fragments are dropped.
+    #[test]
+    fn a_far_line_seen_as_fragments_is_put_on_the_drive_design() {
+        let traj = crate::pipeline::types::test_straight_trajectory(300, -20.0);
+        let mut pieces = near_dashed_lines();
         let inside = [
             0.2, 2.5, 5.0, 1.0, 4.2, 3.3, 0.6, 5.2, 2.0, 3.9, 1.5, 4.8, 0.9, 2.8, 5.3, 1.8,
         ];
@@ -1831,15 +1824,7 @@ mod tests {
     #[test]
     fn a_fragment_row_slanting_across_its_neighbour_makes_no_line() {
         let traj = crate::pipeline::types::test_straight_trajectory(300, -20.0);
-        let mut pieces = Vec::new();
-        for k in 0..18 {
-            let x0 = 3.0 + 15.0 * k as f64;
-            for y in [-1.8, 1.8] {
-                let mut d = shifted(solid(x0, x0 + 6.0), y);
-                d.marking.class = MarkingClass::DashedLine;
-                pieces.push(d);
-            }
-        }
+        let mut pieces = near_dashed_lines();
         for k in 0..9 {
             pieces.push(shifted(solid(30.0 * k as f64, 30.0 * k as f64 + 29.0), 12.0));
         }
