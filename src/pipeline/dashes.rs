@@ -24,7 +24,9 @@
 //!    carries along a run of short dashes: the painted dash whose centre is a whole number
 //!    of periods from the anchor must contain the short dash (within `max(0.3 m, 10 % L)`
 //!    at both ends); it is then extended to that painted dash (and given the median width
-//!    of the complete dashes, if it looked narrower).
+//!    of the complete dashes, if it looked narrower), unless that painted dash already has
+//!    its piece (an anchor, or a short dash placed before): then it is a part of that dash
+//!    and is removed, not drawn a second time.
 //! 4. Between consecutive dashes `n` periods apart (2 ≤ n ≤ `fill_max` + 1, within the same
 //!    tolerance), the `n - 1` missing dashes are added.
 //!
@@ -67,6 +69,9 @@ pub struct Plan {
     pub extend: Vec<(usize, f64, f64, f64)>,
     /// (start, end, width, confidence) of missing dashes to add.
     pub fill: Vec<(f64, f64, f64, f64)>,
+    /// Keys of short dashes that are parts of a painted dash another piece already stands
+    /// for (a complete dash, or a short dash extended to it): to remove.
+    pub absorb: Vec<usize>,
     /// The design found: dash length and period (m).
     pub dash_length: f64,
     pub period: f64,
@@ -134,7 +139,7 @@ pub fn plan_on_designs(spans: &[Span], designs: &[Design], fill_max: usize) -> P
 }
 
 /// Steps 1 and 2: the line's own design and its complete dashes' (centre, confidence).
-fn own_design(spans: &[Span]) -> Option<(Design, Vec<(f64, f64)>)> {
+fn own_design(spans: &[Span]) -> Option<(Design, Vec<Anchor>)> {
     if spans.len() < 4 {
         return None;
     }
@@ -183,7 +188,10 @@ fn own_design(spans: &[Span]) -> Option<(Design, Vec<(f64, f64)>)> {
         period,
         width: median(&mut widths),
     };
-    Some((design, full.iter().map(|s| (centre(s), s.confidence)).collect()))
+    Some((
+        design,
+        full.iter().map(|s| (centre(s), s.confidence, true)).collect(),
+    ))
 }
 
 /// Step 1: the longest length `Lc` that at least 3 dashes have (within [0.85, 1.2] × `Lc`),
@@ -224,8 +232,8 @@ struct PhaseFit {
     sharing: usize,
     /// How far (m) those dashes leave the phase open.
     spread: f64,
-    /// The painted (centre, confidence) of each of them.
-    anchors: Vec<(f64, f64)>,
+    /// The painted dash of each of them (none has its piece yet: all are short).
+    anchors: Vec<Anchor>,
 }
 
 /// The phase of a line on a borrowed design, or `None` when it is not pinned (module docs).
@@ -280,7 +288,7 @@ fn phase_fit(spans: &[Span], d: Design) -> Option<PhaseFit> {
     let shift = 0.5 * (lo + hi);
     let anchors = sharing
         .iter()
-        .map(|s| (start_of(s) + shift + 0.5 * l, s.confidence))
+        .map(|s| (start_of(s) + shift + 0.5 * l, s.confidence, false))
         .collect();
     Some(PhaseFit {
         sharing: n,
@@ -289,8 +297,12 @@ fn phase_fit(spans: &[Span], d: Design) -> Option<PhaseFit> {
     })
 }
 
-/// Steps 3 and 4 on a design and its anchors (centre, confidence).
-fn apply(spans: &[Span], design: Design, anchors: Vec<(f64, f64)>, fill_max: usize) -> Plan {
+/// A painted dash the pattern is pinned to: (centre, confidence, whether a piece stands
+/// for it: a complete dash, or a short dash extended to it).
+type Anchor = (f64, f64, bool);
+
+/// Steps 3 and 4 on a design and its anchors.
+fn apply(spans: &[Span], design: Design, anchors: Vec<Anchor>, fill_max: usize) -> Plan {
     let Design {
         dash_length: l,
         period,
@@ -316,7 +328,7 @@ fn apply(spans: &[Span], design: Design, anchors: Vec<(f64, f64)>, fill_max: usi
                 let c = centre(s);
                 centres
                     .iter()
-                    .map(|&(a, _)| a)
+                    .map(|&(a, _, _)| a)
                     .min_by(|x, y| (x - c).abs().total_cmp(&(y - c).abs()))
                     .map(|a| (i, a, (a - c).abs()))
             })
@@ -332,9 +344,16 @@ fn apply(spans: &[Span], design: Design, anchors: Vec<(f64, f64)>, fill_max: usi
         let cp = anchor + k * period;
         let (a, b) = (cp - 0.5 * l, cp + 0.5 * l);
         if s.a >= a - tol && s.b <= b + tol && s.width <= 1.5 * width {
-            out.extend.push((s.key, a, b, s.width.max(width)));
-            if !centres.iter().any(|&(c, _)| (c - cp).abs() < 0.5 * l) {
-                centres.push((cp, s.confidence));
+            let at = |c: f64| (c - cp).abs() < 0.5 * l;
+            if centres.iter().any(|&(c, _, owned)| owned && at(c)) {
+                // That painted dash already has its piece: this one is a part of it.
+                out.absorb.push(s.key);
+            } else {
+                out.extend.push((s.key, a, b, s.width.max(width)));
+                match centres.iter_mut().find(|(c, _, _)| at(*c)) {
+                    Some(anchor) => anchor.2 = true,
+                    None => centres.push((cp, s.confidence, true)),
+                }
             }
         }
     }
@@ -342,7 +361,7 @@ fn apply(spans: &[Span], design: Design, anchors: Vec<(f64, f64)>, fill_max: usi
     if fill_max > 0 {
         centres.sort_by(|x, y| x.0.total_cmp(&y.0));
         for w in centres.windows(2) {
-            let ((c1, q1), (c2, q2)) = (w[0], w[1]);
+            let ((c1, q1, _), (c2, q2, _)) = (w[0], w[1]);
             let n = ((c2 - c1) / period).round();
             if n >= 2.0 && n <= fill_max as f64 + 1.0 && (c2 - c1 - n * period).abs() <= tol_p * n {
                 let step = (c2 - c1) / n;
@@ -406,6 +425,29 @@ mod tests {
         assert!(conf < 0.9);
         // Nothing added without the fill.
         assert!(plan(&s, 0).fill.is_empty());
+    }
+
+    /// Parts of one painted dash are one dash: a part beside a complete dash, and the second
+    /// of two parts of a worn dash, are absorbed, not drawn again on the same paint.
+    #[test]
+    fn parts_of_a_painted_dash_are_absorbed_not_drawn_twice() {
+        let mut s: Vec<Span> = (0..8)
+            .map(|i| span(i, 1.0 + 6.0 * i as f64, 3.0 + 6.0 * i as f64))
+            .collect();
+        s.push(span(8, 13.5, 14.5)); // inside complete dash 2 (13..15)
+        s[5] = span(5, 31.0, 31.8); // dash 5 worn into two parts
+        s.push(span(9, 32.1, 33.0));
+        let p = plan(&s, 1);
+        assert!((p.period - 6.0).abs() < 0.05, "P {}", p.period);
+        assert_eq!(p.extend.len(), 1, "{:?}", p.extend);
+        assert!((p.extend[0].1 - 31.0).abs() < 0.06 && (p.extend[0].2 - 33.0).abs() < 0.06);
+        let mut absorbed = p.absorb.clone();
+        absorbed.sort_unstable();
+        let other_part = if p.extend[0].0 == 5 { 9 } else { 5 };
+        let mut want = vec![8, other_part];
+        want.sort_unstable();
+        assert_eq!(absorbed, want);
+        assert!(p.fill.is_empty(), "{:?}", p.fill);
     }
 
     /// A piece that does not sit on the pattern (it straddles a gap) is left alone, and so

@@ -489,6 +489,44 @@ fn bridge(a: &Piece, b: &Piece, lane: &[[f64; 2]], max_gap: f64) -> Option<Piece
     })
 }
 
+/// The gaps of lane line `l` that none of its pieces covers, as (piece ending before the
+/// gap, piece starting after it), in driving order. A piece's extent is the station span of
+/// its centreline (outline when it has none) on the lane line; pieces running beside one
+/// another (a short piece alongside a long one, a split cluster) overlap in station, and
+/// taking the line's pieces pairwise in order would "bridge" along paint already there.
+fn uncovered_gaps(l: &lanes::LaneResult, pieces: &[Piece]) -> Vec<(usize, usize)> {
+    let mut spans: Vec<(f64, f64, usize)> = l
+        .pieces
+        .iter()
+        .map(|&k| {
+            let p = &pieces[k];
+            let pts = p.centerline.as_deref().unwrap_or(&p.marking.outline);
+            let (lo, hi) = pts
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &q| {
+                    let s = station_on(&l.line, q);
+                    (lo.min(s), hi.max(s))
+                });
+            (lo, hi, k)
+        })
+        .filter(|s| s.0.is_finite())
+        .collect();
+    spans.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.2.cmp(&b.2)));
+    let mut gaps = Vec::new();
+    let mut cover: Option<(f64, usize)> = None;
+    for (lo, hi, k) in spans {
+        match cover {
+            Some((end, ka)) if lo > end => {
+                gaps.push((ka, k));
+                cover = Some((hi, k));
+            }
+            Some((end, _)) if hi <= end => {}
+            _ => cover = Some((hi, k)),
+        }
+    }
+    gaps
+}
+
 /// The longest gap bridged between solid pieces `la` and `lb` m long: any gap up to
 /// `bridge_solid_gap_m`, and one up to `bridge_long_gap_m` no longer than either piece.
 fn bridge_limit(la: f64, lb: f64, params: &Params) -> f64 {
@@ -811,7 +849,11 @@ fn fragment_plan(spans: &[dashes::Span], designs: &[dashes::Design], length_m: f
     designs
         .iter()
         .map(|d| dashes::plan_on_designs(spans, std::slice::from_ref(d), 0))
-        .find(|p| p.period > 0.0 && 2 * p.extend.len() >= spans.len() && length_m >= 5.0 * p.period)
+        .find(|p| {
+            p.period > 0.0
+                && 2 * (p.extend.len() + p.absorb.len()) >= spans.len()
+                && length_m >= 5.0 * p.period
+        })
 }
 
 /// The dash designs of the drive's dashed lane lines (see [`dashes::plan`]), alike ones
@@ -869,13 +911,14 @@ const FRAGMENT_LINE_MIN_LENGTH_M: f64 = 40.0;
 /// short dashes that fit the pattern get their painted extent, and up to
 /// `fill_missing_dashes` missing dashes in a row are added (confidence halved, no points).
 /// A line with too few complete dashes for a design of its own is tried on the designs of
-/// the drive's other dashed lines. Returns the added pieces.
+/// the drive's other dashed lines. Returns the added pieces and the keys of the pieces
+/// that are parts of a painted dash another piece stands for (to remove).
 fn regularise_dashes(
     pieces: &mut [Piece],
     lines: &[lanes::LaneResult],
     designs: &[dashes::Design],
     params: &Params,
-) -> Vec<Piece> {
+) -> (Vec<Piece>, Vec<usize>) {
     let fill_max = params.fill_missing_dashes as usize;
     let dashed: Vec<&lanes::LaneResult> = lines
         .iter()
@@ -883,7 +926,7 @@ fn regularise_dashes(
         .collect();
     let all_spans: Vec<Vec<dashes::Span>> = dashed.iter().map(|l| dash_spans(l, pieces)).collect();
     let own: Vec<dashes::Plan> = all_spans.iter().map(|sp| dashes::plan(sp, fill_max)).collect();
-    let mut added = Vec::new();
+    let (mut added, mut absorbed) = (Vec::new(), Vec::new());
     for ((l, spans), own) in dashed.into_iter().zip(&all_spans).zip(own) {
         let total = geom::polyline_length(&l.line);
         // A line of fragments is put on the design it was accepted on (`fragment_lines`).
@@ -917,6 +960,7 @@ fn regularise_dashes(
             m.width_m = width;
             pieces[k].centerline = Some(line);
         }
+        absorbed.extend_from_slice(&plan.absorb);
         for &(a, b, width, confidence) in &plan.fill {
             let Some((line, ring)) = make(a, b, width) else {
                 continue;
@@ -942,7 +986,7 @@ fn regularise_dashes(
             });
         }
     }
-    added
+    (added, absorbed)
 }
 
 /// Crosswalk stripes put on their crossing's design (see [`super::crosswalks`]); absorbed
@@ -1358,8 +1402,8 @@ pub fn assemble(
     if params.bridge_solid_gap_m > 0.0 || params.bridge_long_gap_m > 0.0 {
         let mut bridges = Vec::new();
         for l in lanes.lines.iter().filter(|l| l.class == LaneLineClass::SolidLine) {
-            for w in l.pieces.windows(2) {
-                let (a, b) = (&pieces[w[0]], &pieces[w[1]]);
+            for (ka, kb) in uncovered_gaps(l, &pieces) {
+                let (a, b) = (&pieces[ka], &pieces[kb]);
                 if a.marking.class != MarkingClass::SolidLine || b.marking.class != MarkingClass::SolidLine {
                     continue;
                 }
@@ -1378,14 +1422,20 @@ pub fn assemble(
         }
         pieces.extend(bridges);
     }
+    let mut absorbed = Vec::new();
     if params.regularize_dashes {
-        let added = regularise_dashes(&mut pieces, &lanes.lines, &designs, params);
+        let added;
+        (added, absorbed) = regularise_dashes(&mut pieces, &lanes.lines, &designs, params);
         pieces.extend(added);
     }
     // A fragment not placed on a painted dash (`regularise_dashes` clears the flag of those
     // it places) is dropped: off the lane lines it is noise, on one it says where the line
-    // runs, not where its paint is. At the end, so keys stay put.
-    let dropped: Vec<bool> = pieces.iter().map(|p| p.fragment).collect();
+    // runs, not where its paint is. So is a part of a painted dash another piece stands
+    // for. At the end, so keys stay put.
+    let mut dropped: Vec<bool> = pieces.iter().map(|p| p.fragment).collect();
+    for k in absorbed {
+        dropped[k] = true;
+    }
     // Driving order: station of the outline's vertex mean on the absolute reference line.
     let mut order: Vec<(f64, f64, usize)> = pieces
         .iter()
@@ -1570,6 +1620,31 @@ mod tests {
         // Too long, or a mere joint: nothing.
         assert!(bridge(&solid(0.0, 10.0), &solid(15.0, 30.0), &lane, 4.0).is_none());
         assert!(bridge(&solid(0.0, 10.0), &solid(10.05, 30.0), &lane, 4.0).is_none());
+    }
+
+    #[test]
+    fn only_the_stretches_no_piece_covers_are_gaps_of_a_line() {
+        // A long piece with a short one beside it (0.1 m across), then a gap, then a piece;
+        // taken pairwise in order, the short piece "started" a 10 m gap along paint.
+        let pieces = vec![
+            solid(0.0, 50.0),
+            shifted(solid(10.0, 20.0), 0.1),
+            solid(60.0, 100.0),
+            solid(100.0, 120.0),
+        ];
+        let l = lanes::LaneResult {
+            class: LaneLineClass::SolidLine,
+            line: vec![[0.0, 0.0], [120.0, 0.0]],
+            confidence: 0.9,
+            length_m: 120.0,
+            pieces: vec![0, 1, 2, 3],
+            start: [0.0, 0.0],
+        };
+        assert_eq!(uncovered_gaps(&l, &pieces), vec![(0, 2)]);
+        // The piece beside reaching past the long one ends the covered stretch instead.
+        let mut beside = pieces.clone();
+        beside[1] = shifted(solid(40.0, 55.0), 0.1);
+        assert_eq!(uncovered_gaps(&l, &beside), vec![(1, 2)]);
     }
 
     #[test]
