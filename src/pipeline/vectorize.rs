@@ -394,7 +394,7 @@ fn recentre_undersampled(pieces: &mut [Piece], lines: &[lanes::LaneResult]) {
                 near &= d <= RECENTRE_MAX_OFFSET_M;
                 (lo, hi) = (lo.min(s), hi.max(s));
             }
-            if !near || !(hi - lo > 0.1) {
+            if !near || hi - lo <= 0.1 {
                 continue;
             }
             let line = sub_line(&l.line, lo, hi);
