@@ -214,7 +214,9 @@ pub struct Shape {
     pub axis: [f64; 2],
     pub length_m: f64,
     pub width_m: f64,
-    /// Mean slice width over the rectangle width: ~1 for bars, ~0.5 for triangles.
+    /// Mean slice width over the rectangle width: ~1 for bars, ~0.5 for triangles. Slices
+    /// are no shorter than the spacing of the scan rows crossing the cluster
+    /// ([`BarShape::of_rows`]): a far stripe crossed by rows 0.4 m apart is a filled bar.
     pub fill_ratio: f64,
     /// Acute angle between the long axis and the trajectory (deg, 0..=90).
     pub angle_to_trajectory_deg: f64,
@@ -386,7 +388,7 @@ fn describe(
 ) -> Candidate {
     idx.sort_unstable();
     let pts: Vec<[f64; 2]> = idx.iter().map(|&i| xy[i]).collect();
-    let bar = BarShape::of(&pts);
+    let bar = BarShape::of_rows(&pts);
     let center = bar.center();
     let [ms, mo] = refl.locate(center);
     let dir = refl.direction(ms);
