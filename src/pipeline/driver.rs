@@ -514,8 +514,8 @@ fn marking_points(
     add(&mut out, 1, t0);
     check()?;
 
-    let is_mark: Vec<bool> = match p.threshold.method {
-        threshold::Method::None => vec![true; pav.len()],
+    let (is_mark, contrast): (Vec<bool>, Option<Vec<f32>>) = match p.threshold.method {
+        threshold::Method::None => (vec![true; pav.len()], None),
         threshold::Method::Adaptive => {
             progress.report("rasterize", base + 0.25 * step);
             let t0 = Instant::now();
@@ -578,15 +578,17 @@ fn marking_points(
             );
             add(&mut out, 3, t0);
             check()?;
-            marks
+            (marks, Some(values))
         }
     };
-    let idx: Vec<usize> = pav
+    // (position among the pavement points, index in the chunk) of the core's marking points.
+    let (at, idx): (Vec<usize>, Vec<usize>) = pav
         .iter()
         .zip(&is_mark)
-        .filter(|&(&i, &m)| m && c.mileage[i] >= core_lo && c.mileage[i] < core_hi)
-        .map(|(&i, _)| i)
-        .collect();
+        .enumerate()
+        .filter(|&(_, (&i, &m))| m && c.mileage[i] >= core_lo && c.mileage[i] < core_hi)
+        .map(|(k, (&i, _))| (k, i))
+        .unzip();
     let cloud = &mut out.cloud;
     cloud.x = idx.iter().map(|&i| c.x[i]).collect();
     cloud.y = idx.iter().map(|&i| c.y[i]).collect();
@@ -594,6 +596,7 @@ fn marking_points(
     cloud.intensity = idx.iter().map(|&i| c.intensity[i]).collect();
     cloud.gps_time = has_time.then(|| idx.iter().map(|&i| c.gps_time[i]).collect());
     cloud.scanner = idx.iter().map(|&i| c.scanner[i]).collect();
+    cloud.contrast = contrast.map(|v| at.iter().map(|&k| v[k]).collect());
     out.mileage = idx.iter().map(|&i| c.mileage[i]).collect();
     Ok(out)
 }

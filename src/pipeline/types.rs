@@ -40,6 +40,9 @@ pub struct PointCloud {
     /// 0 when the file does not tell heads apart).
     pub scanner: Vec<u8>,
     pub crs: Option<Crs>,
+    /// Marking points only: each point's intensity over the asphalt background around it
+    /// (the normalised value the threshold stage judged it by), when known.
+    pub contrast: Option<Vec<f32>>,
 }
 
 impl PointCloud {
@@ -84,12 +87,24 @@ impl PointCloud {
                 .map(|t| indices.iter().map(|&i| t[i]).collect()),
             scanner: indices.iter().map(|&i| self.scanner[i]).collect(),
             crs: self.crs.clone(),
+            contrast: self
+                .contrast
+                .as_ref()
+                .map(|c| indices.iter().map(|&i| c[i]).collect()),
         }
     }
 
     /// Append another cloud, re-expressing its points relative to this cloud's origin.
-    /// GPS time is kept only if both clouds have it.
+    /// GPS time is kept only if both clouds have it; so is the contrast, which an empty
+    /// cloud takes from the first cloud appended.
     pub fn extend_from(&mut self, other: &PointCloud) {
+        if self.is_empty() && self.contrast.is_none() {
+            self.contrast = other.contrast.as_ref().map(|_| Vec::new());
+        }
+        match (&mut self.contrast, &other.contrast) {
+            (Some(a), Some(b)) => a.extend_from_slice(b),
+            _ => self.contrast = None,
+        }
         let d = [
             other.origin[0] - self.origin[0],
             other.origin[1] - self.origin[1],
@@ -730,6 +745,26 @@ pub(crate) fn test_straight_trajectory(n: usize, x0: f64) -> Trajectory {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The marking points' contrast travels with them: an empty cloud takes it from the
+    /// first cloud appended, `select` keeps it in order, a cloud without it ends it.
+    #[test]
+    fn contrast_travels_with_the_points() {
+        let mut a = PointCloud::with_origin([10.0, 0.0, 0.0]);
+        a.push_local(1.0, 2.0, 0.0, 100.0, None, 0);
+        a.push_local(3.0, 4.0, 0.0, 200.0, None, 0);
+        a.contrast = Some(vec![1.5, 3.0]);
+        let mut all = PointCloud::with_origin([0.0, 0.0, 0.0]);
+        all.extend_from(&a);
+        all.extend_from(&a.select(&[1]));
+        assert_eq!(all.contrast, Some(vec![1.5, 3.0, 3.0]));
+        assert_eq!(all.select(&[2, 0]).contrast, Some(vec![3.0, 1.5]));
+        let mut plain = a.clone();
+        plain.contrast = None;
+        all.extend_from(&plain);
+        assert_eq!(all.contrast, None);
+        assert_eq!(all.len(), 5);
+    }
 
     fn pose(t: f64, x: f64, y: f64) -> Pose {
         test_pose(t, x, y)
