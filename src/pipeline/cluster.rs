@@ -22,8 +22,10 @@
 //!      axis; when most slices have the width w₀ of one painted line and a run of slices is
 //!      much wider, with line-width slices on both sides, the line's centre is interpolated
 //!      through the wide run and the points off that line are split off — but only parts
-//!      that are themselves filled bars parallel to the line (a dash), so an arrow head or a
-//!      combined arrow's branch is never cut from its shaft;
+//!      that are themselves filled bars parallel to the line (a dash), or, on a line at
+//!      least 12 m long, filled bars at 20–70° to it (a gore area's chevrons, a hatched
+//!      island's stripes), so an arrow head or a combined arrow's branch is never cut from
+//!      its shaft;
 //!    - *lateral valley*: the offsets from a smoothed centre (so curved pairs work) form two
 //!      modes separated by an almost empty valley (double lines, side-by-side dashes,
 //!      crosswalk stripes bridged by noise) → split at the valley; on short clusters the same
@@ -396,7 +398,18 @@ fn profile_split(pts: &[[f64; 2]], p: &Params) -> Option<Vec<Vec<usize>>> {
                 && b.width() >= (0.4 * w0).max(0.06)
                 && part.len() as f64 >= 0.3 * density * b.length() * b.width()
         });
-        if parallel {
+        // A stripe touching a long line obliquely (a chevron of a gore area, a hatched
+        // island's stripe): a filled bar at least 1 m long and as wide as paint, at 20-70°
+        // to a line too long to be an arrow (whose head and branches stay on its shaft).
+        let oblique = len >= OBLIQUE_LINE_MIN_LENGTH_M
+            && bar.is_some_and(|b| {
+                let a = geom::acute_angle_deg(b.pca.axis, pca.axis);
+                (OBLIQUE_MIN_DEG..=OBLIQUE_MAX_DEG).contains(&a)
+                    && b.length() >= 1.0
+                    && b.width() >= 0.1
+                    && part.len() as f64 >= 0.3 * density * b.length() * b.width()
+            });
+        if parallel || oblique {
             out.push(part);
         } else {
             line.extend(part);
@@ -409,6 +422,14 @@ fn profile_split(pts: &[[f64; 2]], p: &Params) -> Option<Vec<Vec<usize>>> {
     out.insert(0, line);
     Some(out)
 }
+
+/// Lines at least this long (m) have oblique stripes touching them split off (see
+/// [`profile_split`]); shorter clusters may be arrows, whose head and branches stay whole.
+const OBLIQUE_LINE_MIN_LENGTH_M: f64 = 12.0;
+/// Angles (deg) between such a stripe and the line: guideline stripes and chevrons, not
+/// crosswalk stripes (along or across the road) nor stop lines.
+const OBLIQUE_MIN_DEG: f64 = 20.0;
+const OBLIQUE_MAX_DEG: f64 = 70.0;
 
 /// Histogram valley split across (and, for short clusters, along) the principal axis.
 fn valley_split(pts: &[[f64; 2]], p: &Params) -> Option<Vec<Vec<usize>>> {
@@ -880,6 +901,27 @@ mod tests {
             "dash points left in the solid: {wrong} of {ndash}"
         );
         assert!(c.iter().all(|c| c.split));
+    }
+
+    /// A gore area's edge line (30 m × 0.2 m) with four chevrons (2 m × 0.4 m at 35°)
+    /// touching it: the chevrons are split off, each one cluster.
+    #[test]
+    fn oblique_stripes_touching_a_long_line_are_split_off() {
+        let mut pts = rect(0.0, 0.0, 30.0, 0.2, 0.0, 0.03, 1);
+        let nline = pts.len();
+        for (k, x) in [-9.0, -3.0, 3.0, 9.0].into_iter().enumerate() {
+            // Centre 1 m from the stripe's end on the line's upper edge.
+            let (s, c) = 35f64.to_radians().sin_cos();
+            pts.extend(rect(x + c, 0.1 + s, 2.0, 0.4, 35.0, 0.03, 10 + k as u64));
+        }
+        let c = run(&cloud(&pts), &Params::default());
+        assert_eq!(c.len(), 5, "{:?}", sizes(&c));
+        let line = c.iter().max_by_key(|c| c.indices.len()).unwrap();
+        let wrong = line.indices.iter().filter(|&&i| i >= nline).count();
+        assert!(
+            wrong * 4 < pts.len() - nline,
+            "stripe points left on the line: {wrong}"
+        );
     }
 
     #[test]
