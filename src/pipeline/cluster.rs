@@ -389,26 +389,19 @@ fn profile_split(pts: &[[f64; 2]], p: &Params) -> Option<Vec<Vec<usize>>> {
     // Points per m² of the line, to tell a dash from a sparse scatter of stray points.
     let density = pts.len() as f64 / (len * w0).max(1e-6);
     for part in parts {
-        let bar = filled_bar(&part.iter().map(|&k| pts[k]).collect::<Vec<_>>());
-        // A dash: parallel, at least 1 m long, as wide as a painted line (not a sliver
-        // shaved off the line's own edge) and about as dense as the line.
-        let parallel = bar.is_some_and(|b| {
-            geom::acute_angle_deg(b.pca.axis, pca.axis) <= 12.0
-                && b.length() >= 1.0
-                && b.width() >= (0.4 * w0).max(0.06)
-                && part.len() as f64 >= 0.3 * density * b.length() * b.width()
-        });
+        // A filled bar at least 1 m long, about as dense as the line (not a sparse scatter
+        // of stray points), at this angle (deg) to the line.
+        let bar = filled_bar(&part.iter().map(|&k| pts[k]).collect::<Vec<_>>())
+            .filter(|b| b.length() >= 1.0 && part.len() as f64 >= 0.3 * density * b.length() * b.width())
+            .map(|b| (geom::acute_angle_deg(b.pca.axis, pca.axis), b.width()));
+        // A dash: parallel and as wide as a painted line (not a sliver shaved off the line's
+        // own edge).
+        let parallel = bar.is_some_and(|(a, w)| a <= 12.0 && w >= (0.4 * w0).max(0.06));
         // A stripe touching a long line obliquely (a chevron of a gore area, a hatched
-        // island's stripe): a filled bar at least 1 m long and as wide as paint, at 20-70°
-        // to a line too long to be an arrow (whose head and branches stay on its shaft).
+        // island's stripe), as wide as paint, on a line too long to be an arrow (whose head
+        // and branches stay on its shaft).
         let oblique = len >= OBLIQUE_LINE_MIN_LENGTH_M
-            && bar.is_some_and(|b| {
-                let a = geom::acute_angle_deg(b.pca.axis, pca.axis);
-                (OBLIQUE_MIN_DEG..=OBLIQUE_MAX_DEG).contains(&a)
-                    && b.length() >= 1.0
-                    && b.width() >= 0.1
-                    && part.len() as f64 >= 0.3 * density * b.length() * b.width()
-            });
+            && bar.is_some_and(|(a, w)| (OBLIQUE_MIN_DEG..=OBLIQUE_MAX_DEG).contains(&a) && w >= 0.1);
         if parallel || oblique {
             out.push(part);
         } else {

@@ -188,10 +188,15 @@ fn own_design(spans: &[Span]) -> Option<(Design, Vec<Anchor>)> {
         period,
         width: median(&mut widths),
     };
-    Some((
-        design,
-        full.iter().map(|s| (centre(s), s.confidence, true)).collect(),
-    ))
+    let anchors = full
+        .iter()
+        .map(|s| Anchor {
+            centre: centre(s),
+            confidence: s.confidence,
+            placed: true,
+        })
+        .collect();
+    Some((design, anchors))
 }
 
 /// Step 1: the longest length `Lc` that at least 3 dashes have (within [0.85, 1.2] × `Lc`),
@@ -288,7 +293,11 @@ fn phase_fit(spans: &[Span], d: Design) -> Option<PhaseFit> {
     let shift = 0.5 * (lo + hi);
     let anchors = sharing
         .iter()
-        .map(|s| (start_of(s) + shift + 0.5 * l, s.confidence, false))
+        .map(|s| Anchor {
+            centre: start_of(s) + shift + 0.5 * l,
+            confidence: s.confidence,
+            placed: false,
+        })
         .collect();
     Some(PhaseFit {
         sharing: n,
@@ -297,9 +306,14 @@ fn phase_fit(spans: &[Span], d: Design) -> Option<PhaseFit> {
     })
 }
 
-/// A painted dash the pattern is pinned to: (centre, confidence, whether a piece stands
-/// for it: a complete dash, or a short dash extended to it).
-type Anchor = (f64, f64, bool);
+/// A painted dash the pattern is pinned to.
+#[derive(Clone, Copy, Debug)]
+struct Anchor {
+    centre: f64,
+    confidence: f64,
+    /// Whether a piece stands for it: a complete dash, or a short dash extended to it.
+    placed: bool,
+}
 
 /// Steps 3 and 4 on a design and its anchors.
 fn apply(spans: &[Span], design: Design, anchors: Vec<Anchor>, fill_max: usize) -> Plan {
@@ -328,7 +342,7 @@ fn apply(spans: &[Span], design: Design, anchors: Vec<Anchor>, fill_max: usize) 
                 let c = centre(s);
                 centres
                     .iter()
-                    .map(|&(a, _, _)| a)
+                    .map(|a| a.centre)
                     .min_by(|x, y| (x - c).abs().total_cmp(&(y - c).abs()))
                     .map(|a| (i, a, (a - c).abs()))
             })
@@ -344,31 +358,39 @@ fn apply(spans: &[Span], design: Design, anchors: Vec<Anchor>, fill_max: usize) 
         let cp = anchor + k * period;
         let (a, b) = (cp - 0.5 * l, cp + 0.5 * l);
         if s.a >= a - tol && s.b <= b + tol && s.width <= 1.5 * width {
-            let at = |c: f64| (c - cp).abs() < 0.5 * l;
-            if centres.iter().any(|&(c, _, owned)| owned && at(c)) {
+            let at = |c: &Anchor| (c.centre - cp).abs() < 0.5 * l;
+            if centres.iter().any(|c| c.placed && at(c)) {
                 // That painted dash already has its piece: this one is a part of it.
                 out.absorb.push(s.key);
             } else {
                 out.extend.push((s.key, a, b, s.width.max(width)));
-                match centres.iter_mut().find(|(c, _, _)| at(*c)) {
-                    Some(anchor) => anchor.2 = true,
-                    None => centres.push((cp, s.confidence, true)),
+                match centres.iter_mut().find(|c| at(c)) {
+                    Some(anchor) => anchor.placed = true,
+                    None => centres.push(Anchor {
+                        centre: cp,
+                        confidence: s.confidence,
+                        placed: true,
+                    }),
                 }
             }
         }
     }
     // 4. Missing dashes in a regular run.
     if fill_max > 0 {
-        centres.sort_by(|x, y| x.0.total_cmp(&y.0));
+        centres.sort_by(|x, y| x.centre.total_cmp(&y.centre));
         for w in centres.windows(2) {
-            let ((c1, q1, _), (c2, q2, _)) = (w[0], w[1]);
+            let (c1, c2) = (w[0].centre, w[1].centre);
             let n = ((c2 - c1) / period).round();
             if n >= 2.0 && n <= fill_max as f64 + 1.0 && (c2 - c1 - n * period).abs() <= tol_p * n {
                 let step = (c2 - c1) / n;
                 for j in 1..n as usize {
                     let cp = c1 + j as f64 * step;
-                    out.fill
-                        .push((cp - 0.5 * l, cp + 0.5 * l, width, 0.5 * q1.min(q2)));
+                    out.fill.push((
+                        cp - 0.5 * l,
+                        cp + 0.5 * l,
+                        width,
+                        0.5 * w[0].confidence.min(w[1].confidence),
+                    ));
                 }
             }
         }

@@ -279,7 +279,6 @@ fn run_ctx(ctx: &mut Ctx<'_>, inputs: &Inputs) -> Result<Extraction, PipelineErr
                     if let Some(all) = ctx.collect.as_mut() {
                         if all.is_empty() {
                             *all = PointCloud::with_origin(origin);
-                            all.gps_time = marks.gps_time.as_ref().map(|_| Vec::new());
                         }
                         all.extend_from(&marks);
                     }
@@ -640,9 +639,6 @@ impl Streaming {
             ),
             None => (PointCloud::with_origin(new.origin), Vec::new(), Vec::new()),
         };
-        if all.gps_time.is_none() && all.is_empty() {
-            all.gps_time = new.gps_time.as_ref().map(|_| Vec::new());
-        }
         all.extend_from(&new);
         all_m.extend_from_slice(&new_m);
         all_long.resize(all_m.len(), false);
@@ -750,7 +746,6 @@ fn finish_clusters(
     let p = ctx.params;
     // One cloud of all complete clusters, each a cluster of consecutive indices.
     let mut cloud = PointCloud::with_origin(origin);
-    cloud.gps_time = complete[0].points.gps_time.as_ref().map(|_| Vec::new());
     let mut clusters = Vec::with_capacity(complete.len());
     for c in &complete {
         let start = cloud.len();

@@ -731,17 +731,17 @@ impl BarShape {
             // because nothing was sampled there, not because the bar is not filled. The
             // second-largest gap along the axis stands for that spacing (a bar crossed by
             // rows has a gap at every row; one hole in a shape is ignored).
-            let (mut g1, mut g2) = (0.0f64, 0.0f64);
-            for w in uv.windows(2) {
-                let g = (w[1][0] - w[0][0]).min(MAX_ROW_SPACING_M);
-                if g > g1 {
-                    (g1, g2) = (g, g1);
-                } else if g > g2 {
-                    g2 = g;
-                }
-            }
             let mut nsl = ((xy.len() / 6).clamp(2, 20)).min(((len / 0.05) as usize).max(2));
             if rows {
+                let (mut g1, mut g2) = (0.0f64, 0.0f64);
+                for w in uv.windows(2) {
+                    let g = (w[1][0] - w[0][0]).min(MAX_ROW_SPACING_M);
+                    if g > g1 {
+                        (g1, g2) = (g, g1);
+                    } else if g > g2 {
+                        g2 = g;
+                    }
+                }
                 nsl = nsl.min(((len / (1.01 * g2)) as usize).max(2));
             }
             let dl = len / nsl as f64;

@@ -95,16 +95,21 @@ impl PointCloud {
     }
 
     /// Append another cloud, re-expressing its points relative to this cloud's origin.
-    /// GPS time is kept only if both clouds have it; so is the contrast, which an empty
-    /// cloud takes from the first cloud appended.
+    /// The optional columns (GPS time, contrast) are kept only if both clouds have them; an
+    /// empty cloud takes them from the first cloud appended.
     pub fn extend_from(&mut self, other: &PointCloud) {
-        if self.is_empty() && self.contrast.is_none() {
-            self.contrast = other.contrast.as_ref().map(|_| Vec::new());
+        fn column<T: Copy>(empty: bool, mine: &mut Option<Vec<T>>, theirs: &Option<Vec<T>>) {
+            if empty {
+                *mine = theirs.as_ref().map(|_| Vec::new());
+            }
+            match (mine.as_mut(), theirs) {
+                (Some(a), Some(b)) => a.extend_from_slice(b),
+                _ => *mine = None,
+            }
         }
-        match (&mut self.contrast, &other.contrast) {
-            (Some(a), Some(b)) => a.extend_from_slice(b),
-            _ => self.contrast = None,
-        }
+        let empty = self.is_empty();
+        column(empty, &mut self.gps_time, &other.gps_time);
+        column(empty, &mut self.contrast, &other.contrast);
         let d = [
             other.origin[0] - self.origin[0],
             other.origin[1] - self.origin[1],
@@ -114,10 +119,6 @@ impl PointCloud {
         self.y.extend(other.y.iter().map(|v| v + d[1]));
         self.z.extend(other.z.iter().map(|v| v + d[2]));
         self.intensity.extend_from_slice(&other.intensity);
-        match (&mut self.gps_time, &other.gps_time) {
-            (Some(a), Some(b)) => a.extend_from_slice(b),
-            _ => self.gps_time = None,
-        }
         self.scanner.extend_from_slice(&other.scanner);
         if self.crs.is_none() {
             self.crs = other.crs.clone();
@@ -746,18 +747,21 @@ pub(crate) fn test_straight_trajectory(n: usize, x0: f64) -> Trajectory {
 mod tests {
     use super::*;
 
-    /// The marking points' contrast travels with them: an empty cloud takes it from the
-    /// first cloud appended, `select` keeps it in order, a cloud without it ends it.
+    /// The marking points' contrast (and GPS time) travels with them: an empty cloud takes
+    /// it from the first cloud appended, `select` keeps it in order, a cloud without it
+    /// ends it.
     #[test]
     fn contrast_travels_with_the_points() {
         let mut a = PointCloud::with_origin([10.0, 0.0, 0.0]);
         a.push_local(1.0, 2.0, 0.0, 100.0, None, 0);
         a.push_local(3.0, 4.0, 0.0, 200.0, None, 0);
         a.contrast = Some(vec![1.5, 3.0]);
+        a.gps_time = Some(vec![7.0, 8.0]);
         let mut all = PointCloud::with_origin([0.0, 0.0, 0.0]);
         all.extend_from(&a);
         all.extend_from(&a.select(&[1]));
         assert_eq!(all.contrast, Some(vec![1.5, 3.0, 3.0]));
+        assert_eq!(all.gps_time, Some(vec![7.0, 8.0, 8.0]));
         assert_eq!(all.select(&[2, 0]).contrast, Some(vec![3.0, 1.5]));
         let mut plain = a.clone();
         plain.contrast = None;

@@ -408,13 +408,8 @@ fn recentre_undersampled(pieces: &mut [Piece], lines: &[lanes::LaneResult]) {
             let (Some(cl), true, true) = (p.centerline.as_ref(), line_piece, p.undersampled.is_some()) else {
                 continue;
             };
-            let (mut lo, mut hi, mut near) = (f64::INFINITY, f64::NEG_INFINITY, true);
-            for &q in cl {
-                let (d, s) = locate_on(&l.line, q);
-                near &= d <= RECENTRE_MAX_OFFSET_M;
-                (lo, hi) = (lo.min(s), hi.max(s));
-            }
-            if !near || hi - lo <= 0.1 {
+            let (lo, hi, off) = station_span(&l.line, cl);
+            if off > RECENTRE_MAX_OFFSET_M || hi - lo <= 0.1 {
                 continue;
             }
             let line = sub_line(&l.line, lo, hi);
@@ -575,13 +570,7 @@ fn uncovered_gaps(l: &lanes::LaneResult, pieces: &[Piece]) -> Vec<(usize, usize)
         .iter()
         .map(|&k| {
             let p = &pieces[k];
-            let pts = p.centerline.as_deref().unwrap_or(&p.marking.outline);
-            let (lo, hi) = pts
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &q| {
-                    let s = station_on(&l.line, q);
-                    (lo.min(s), hi.max(s))
-                });
+            let (lo, hi, _) = station_span(&l.line, p.centerline.as_deref().unwrap_or(&p.marking.outline));
             (lo, hi, k)
         })
         .filter(|s| s.0.is_finite())
@@ -650,6 +639,17 @@ fn locate_on(lane: &[[f64; 2]], p: [f64; 2]) -> (f64, f64) {
     best
 }
 
+/// The stretch of polyline `lane` that the points `pts` span (smallest and largest station
+/// of their nearest points) and the largest distance of a point from it; `(inf, -inf, 0)`
+/// for no points.
+fn station_span(lane: &[[f64; 2]], pts: &[[f64; 2]]) -> (f64, f64, f64) {
+    pts.iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY, 0.0f64), |(lo, hi, off), &q| {
+            let (d, s) = locate_on(lane, q);
+            (lo.min(s), hi.max(s), off.max(d))
+        })
+}
+
 /// Whether the piece's centreline (ends and middle) lies within `tol` of a lane line, within
 /// the line's extent.
 fn on_a_lane_line(lines: &[lanes::LaneResult], cl: &[[f64; 2]], tol: f64) -> bool {
@@ -698,10 +698,7 @@ fn dash_spans(l: &lanes::LaneResult, pieces: &[Piece]) -> Vec<dashes::Span> {
         .iter()
         .filter(|&&k| pieces[k].marking.class == MarkingClass::DashedLine)
         .filter_map(|&k| {
-            let cl = pieces[k].centerline.as_ref()?;
-            let st: Vec<f64> = cl.iter().map(|&q| station_on(&l.line, q)).collect();
-            let a = st.iter().copied().fold(f64::INFINITY, f64::min);
-            let b = st.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            let (a, b, _) = station_span(&l.line, pieces[k].centerline.as_ref()?);
             Some(dashes::Span {
                 key: k,
                 a,
@@ -1500,12 +1497,12 @@ pub fn assemble(
         }
         pieces.extend(bridges);
     }
-    let mut absorbed = Vec::new();
-    if params.regularize_dashes {
-        let added;
-        (added, absorbed) = regularise_dashes(&mut pieces, &lanes.lines, &designs, params);
-        pieces.extend(added);
-    }
+    let (added, absorbed) = if params.regularize_dashes {
+        regularise_dashes(&mut pieces, &lanes.lines, &designs, params)
+    } else {
+        Default::default()
+    };
+    pieces.extend(added);
     // A fragment not placed on a painted dash (`regularise_dashes` clears the flag of those
     // it places) is dropped: off the lane lines it is noise, on one it says where the line
     // runs, not where its paint is. So is a part of a painted dash another piece stands
