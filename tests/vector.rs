@@ -297,6 +297,69 @@ fn straight_road_dashes_solid_and_parallel_lines_never_joined() {
 }
 
 #[test]
+fn a_streak_across_a_dash_does_not_widen_its_outline() {
+    // 6 m × 0.15 m dashes, each crossed near its middle by a 0.4 m band of bright points
+    // 0.35 m wide (a sealant streak or a glint): 7 % of the dash's points lie beside the
+    // paint, so the trimmed extent across it reads ~0.3 m; the outline must keep the
+    // painted 0.15 m.
+    let path = Path { radius: None };
+    let paint = vec![
+        dashes(1.75, 0.15, 6.0, 9.0, 2.0, 62.0, &[]),
+        Paint {
+            offset: -1.75,
+            width: 0.15,
+            intervals: vec![(0.0, 62.0)],
+        },
+    ];
+    let (mut cloud, traj) = scan(path, 62.0, &paint, 3);
+    let mut rng = Lcg(11);
+    for iv in &paint[0].intervals {
+        let mid = (iv.0 + iv.1) / 2.0;
+        for i in 0..8 {
+            for j in 0..=17 {
+                let s = mid + 0.05 + 0.05 * i as f64;
+                let o = 1.75 - 0.175 + 0.02 * j as f64;
+                if (o - 1.75).abs() > 0.075 {
+                    cloud.push_local(
+                        s + 0.005 * rng.gauss(),
+                        o + 0.005 * rng.gauss(),
+                        0.0,
+                        40000.0,
+                        None,
+                        0,
+                    );
+                }
+            }
+        }
+    }
+    let out = pipeline(&cloud, &traj);
+    let dashes: Vec<&Marking> = out
+        .markings
+        .iter()
+        .filter(|m| m.class == MarkingClass::DashedLine)
+        .collect();
+    assert_eq!(dashes.len(), paint[0].intervals.len(), "{:?}", out.markings);
+    for m in dashes {
+        assert!(
+            (m.width_m - 0.15).abs() < 0.03,
+            "dash widened by the streak: {m:?}"
+        );
+        let ring_w = m
+            .outline
+            .iter()
+            .map(|p| p[1] - cloud.origin[1])
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |a, y| {
+                (a.0.min(y), a.1.max(y))
+            });
+        assert!(
+            ring_w.1 - ring_w.0 < 0.2,
+            "outline {:.3} m across",
+            ring_w.1 - ring_w.0
+        );
+    }
+}
+
+#[test]
 fn curved_dashed_line_follows_the_arc() {
     // R = 100 m, GB 6/9 m dashes 1.75 m left of the path, solid edge 1.75 m right.
     let path = Path { radius: Some(100.0) };

@@ -233,10 +233,21 @@ pub fn outlines(cloud: &PointCloud, candidates: &[Candidate], params: &Params) -
                         let ring = outline::buffered_line_simple(&simple, l.paint_width_m / 2.0);
                         (ring, l.length_m, l.paint_width_m, heading_deg(chord), Some(cl))
                     } else {
+                        // A densely scanned dash is as wide as its line geometry's painted
+                        // width (twice the interquartile range across it, like solid and
+                        // curved pieces): a crack-sealant streak or a glint crossing the dash
+                        // widens the rectangle's trimmed extent, not the IQR. A sparse one
+                        // (a few points per scan row across it) keeps the extent: there the
+                        // IQR of a handful of discrete offsets reads it too narrow.
+                        let dense = c.indices.len() as f64 >= DASH_IQR_MIN_DENSITY * s.length_m * s.width_m;
+                        let mut rect = s.clone();
+                        if dense {
+                            rect.width_m = l.paint_width_m;
+                        }
                         (
-                            s.corners().to_vec(),
+                            rect.corners().to_vec(),
                             s.length_m,
-                            s.width_m,
+                            rect.width_m,
                             heading_deg(along),
                             Some(cl),
                         )
@@ -338,6 +349,12 @@ pub fn outlines(cloud: &PointCloud, candidates: &[Candidate], params: &Params) -
 
 /// A line piece narrower than this many point spacings is not resolved across.
 const UNRESOLVED_POINTS_ACROSS: f64 = 2.0;
+
+/// Points per m² of its rectangle from which a straight dash's outline takes the painted
+/// width of its line geometry (2 × IQR) instead of the rectangle's trimmed extent: about
+/// one point per 5 cm × 5 cm, three or more across a 0.15 m dash on every scan row. Far
+/// dashes of the simulated drives hold 100–150 per m², near ones 1000–3000.
+const DASH_IQR_MIN_DENSITY: f64 = 400.0;
 
 /// At most this much (m) is added to an unresolved width when no lane-line reference exists
 /// (as in `classify`'s judgement of sparse lines: scattered noise is not made wide).
