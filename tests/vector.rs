@@ -77,6 +77,15 @@ struct Paint {
     intervals: Vec<(f64, f64)>,
 }
 
+/// A solid line from 0 to `end`.
+fn solid(offset: f64, width: f64, end: f64) -> Paint {
+    Paint {
+        offset,
+        width,
+        intervals: vec![(0.0, end)],
+    }
+}
+
 /// A dashed line: dash/gap pattern from `start` to `end`, skipping `holes`.
 fn dashes(offset: f64, width: f64, dash: f64, gap: f64, start: f64, end: f64, holes: &[(f64, f64)]) -> Paint {
     let mut iv = Vec::new();
@@ -221,11 +230,7 @@ fn empty_and_tiny_inputs_give_empty_results() {
 fn straight_road_dashes_solid_and_parallel_lines_never_joined() {
     let path = Path { radius: None };
     let paint = vec![
-        Paint {
-            offset: -1.75,
-            width: 0.15,
-            intervals: vec![(0.0, 120.0)],
-        },
+        solid(-1.75, 0.15, 120.0),
         dashes(1.75, 0.15, 6.0, 9.0, 2.0, 120.0, &[]),
         dashes(5.25, 0.15, 6.0, 9.0, 5.0, 120.0, &[]),
     ];
@@ -305,11 +310,7 @@ fn a_streak_across_a_dash_does_not_widen_its_outline() {
     let path = Path { radius: None };
     let paint = vec![
         dashes(1.75, 0.15, 6.0, 9.0, 2.0, 62.0, &[]),
-        Paint {
-            offset: -1.75,
-            width: 0.15,
-            intervals: vec![(0.0, 62.0)],
-        },
+        solid(-1.75, 0.15, 62.0),
     ];
     let (mut cloud, traj) = scan(path, 62.0, &paint, 3);
     let mut rng = Lcg(11);
@@ -365,11 +366,7 @@ fn curved_dashed_line_follows_the_arc() {
     let path = Path { radius: Some(100.0) };
     let paint = vec![
         dashes(1.75, 0.15, 6.0, 9.0, 0.0, 150.0, &[]),
-        Paint {
-            offset: -1.75,
-            width: 0.15,
-            intervals: vec![(0.0, 150.0)],
-        },
+        solid(-1.75, 0.15, 150.0),
     ];
     let (cloud, traj) = scan(path, 150.0, &paint, 2);
     let out = pipeline(&cloud, &traj);
@@ -433,11 +430,7 @@ fn dash_touching_a_solid_line_is_its_own_dash() {
     // A solid–dashed double line: solid at 0, dashes centred 0.16 m beside it (touching).
     let path = Path { radius: None };
     let paint = vec![
-        Paint {
-            offset: 0.0,
-            width: 0.15,
-            intervals: vec![(0.0, 60.0)],
-        },
+        solid(0.0, 0.15, 60.0),
         dashes(0.16, 0.15, 6.0, 9.0, 3.0, 60.0, &[]),
     ];
     let (cloud, traj) = scan(path, 60.0, &paint, 4);
@@ -549,11 +542,7 @@ fn outlines_contain_their_points() {
     let path = Path { radius: Some(150.0) };
     let paint = vec![
         dashes(1.75, 0.15, 6.0, 9.0, 0.0, 80.0, &[]),
-        Paint {
-            offset: -1.75,
-            width: 0.2,
-            intervals: vec![(0.0, 80.0)],
-        },
+        solid(-1.75, 0.2, 80.0),
     ];
     let (mut cloud, traj) = scan(path, 80.0, &paint, 5);
     // An arrow-like irregular blob (triangle) off the lines.

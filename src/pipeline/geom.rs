@@ -470,7 +470,7 @@ pub fn weighted_median(v: &mut [(f64, f64)]) -> f64 {
 /// the range widened by one mean gap for small ones. `v` must be sorted and non-empty.
 pub fn robust_extent(v: &[f64]) -> (f64, f64) {
     let n = v.len();
-    if n < 40 {
+    let Some(p) = trim_fraction(n) else {
         let (lo, hi) = (v[0], v[n - 1]);
         let pad = if n > 1 {
             (hi - lo) / (n - 1) as f64 / 2.0
@@ -478,12 +478,21 @@ pub fn robust_extent(v: &[f64]) -> (f64, f64) {
             0.0
         };
         return (lo - pad, hi + pad);
-    }
-    let p = if n >= 100 { 0.02 } else { 0.01 };
+    };
     let (a, b) = (quantile_sorted(v, p), quantile_sorted(v, 1.0 - p));
     let half = (b - a) / (1.0 - 2.0 * p) / 2.0;
     let c = (a + b) / 2.0;
     (c - half, c + half)
+}
+
+/// Share of a sample [`robust_extent`] trims at each end (`None`: too small to trim, it
+/// takes the range widened by half a mean gap).
+fn trim_fraction(n: usize) -> Option<f64> {
+    match n {
+        0..40 => None,
+        40..100 => Some(0.01),
+        _ => Some(0.02),
+    }
 }
 
 /// Most that [`row_extent`] widens an end by (m): half the spacing of the scan rows near a
@@ -506,13 +515,7 @@ pub fn row_extent(v: &[f64]) -> (f64, f64) {
         return (lo, hi);
     }
     // The trimmed sample (as robust_extent trims): a stray point makes no row.
-    let p = if n >= 100 {
-        0.02
-    } else if n >= 40 {
-        0.01
-    } else {
-        0.0
-    };
+    let p = trim_fraction(n).unwrap_or(0.0);
     let (a, b) = (quantile_sorted(v, p), quantile_sorted(v, 1.0 - p));
     let inner: Vec<f64> = v.iter().copied().filter(|&x| x >= a && x <= b).collect();
     let mut gaps: Vec<f64> = inner.windows(2).map(|w| w[1] - w[0]).collect();

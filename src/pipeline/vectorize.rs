@@ -272,25 +272,18 @@ pub fn outlines(cloud: &PointCloud, candidates: &[Candidate], params: &Params) -
                         None,
                     )
                 }
-                MarkingClass::StopLine => {
+                MarkingClass::StopLine | MarkingClass::Crosswalk => {
+                    // A stop line heads to the right of the driving direction.
                     let right = [drive[1], -drive[0]];
-                    let d = if s.axis[0] * right[0] + s.axis[1] * right[1] < 0.0 {
+                    let d = if c.class == MarkingClass::Crosswalk {
+                        along
+                    } else if s.axis[0] * right[0] + s.axis[1] * right[1] < 0.0 {
                         [-s.axis[0], -s.axis[1]]
                     } else {
                         s.axis
                     };
                     let r = row_rect(cloud, &c.indices, s);
                     (r.corners().to_vec(), r.length_m, r.width_m, heading_deg(d), None)
-                }
-                MarkingClass::Crosswalk => {
-                    let r = row_rect(cloud, &c.indices, s);
-                    (
-                        r.corners().to_vec(),
-                        r.length_m,
-                        r.width_m,
-                        heading_deg(along),
-                        None,
-                    )
                 }
                 MarkingClass::Guideline | MarkingClass::DashedLine | MarkingClass::SolidLine => (
                     s.corners().to_vec(),
@@ -365,20 +358,23 @@ fn row_rect(cloud: &PointCloud, indices: &[usize], s: &Shape) -> Shape {
     if indices.len() < 8 {
         return s.clone();
     }
-    let (a, c) = (s.axis, s.center);
+    let frame = geom::Pca {
+        center: s.center,
+        axis: s.axis,
+        var: [0.0, 0.0],
+    };
     let (mut us, mut vs): (Vec<f64>, Vec<f64>) = indices
         .iter()
         .map(|&i| {
-            let d = [cloud.x[i] - c[0], cloud.y[i] - c[1]];
-            (d[0] * a[0] + d[1] * a[1], -d[0] * a[1] + d[1] * a[0])
+            let q = frame.to_frame([cloud.x[i], cloud.y[i]]);
+            (q[0], q[1])
         })
         .unzip();
     us.sort_unstable_by(f64::total_cmp);
     vs.sort_unstable_by(f64::total_cmp);
     let (u, v) = (geom::row_extent(&us), geom::row_extent(&vs));
-    let (mu, mv) = ((u.0 + u.1) / 2.0, (v.0 + v.1) / 2.0);
     let mut r = s.clone();
-    r.center = [c[0] + mu * a[0] - mv * a[1], c[1] + mu * a[1] + mv * a[0]];
+    r.center = frame.from_frame([(u.0 + u.1) / 2.0, (v.0 + v.1) / 2.0]);
     r.length_m = u.1 - u.0;
     r.width_m = v.1 - v.0;
     r
