@@ -586,16 +586,29 @@ fn line_geometry(pts: &[[f64; 2]], refl: &RefLine, p: &Params) -> Option<LineGeo
 /// Fragments closer than this (m, nearest points) belong to one group in
 /// [`group_fragments`].
 const FRAGMENT_GAP_M: f64 = 0.5;
+
+/// Fewest points of a cluster dropped as tiny that [`group_fragments`] offers (a single
+/// scan row across a far arrow's shaft holds 5–10).
+const FRAGMENT_MIN_TINY_POINTS: usize = 5;
+
+/// Fewest points of a cluster dropped as a blob or steep noise that [`group_fragments`]
+/// offers.
+const FRAGMENT_MIN_DROPPED_POINTS: usize = 10;
 /// Fragments longer than this (m) are no part of one painted object's pieces.
 const FRAGMENT_MAX_LENGTH_M: f64 = 6.0;
 
-/// Worn or sparsely scanned arrows and diamonds fall apart into several `unknown` pieces
-/// that no single look can name. Kept `unknown` candidates no longer than
-/// [`FRAGMENT_MAX_LENGTH_M`] that lie within [`FRAGMENT_GAP_M`] of each other (single
-/// linkage on their nearest points) form a group; a group of two or more whose union is no
-/// longer than [`MAX_OBJECT_LENGTH_M`] is given to each member as its `whole`, for the
-/// learned classifier to put back together when the union is one painted object (as for
-/// the pieces `peel_lines` leaves).
+/// Worn or sparsely scanned arrows and diamonds fall apart into several pieces that no
+/// single look can name: `unknown` pieces, a shaft that passes for a dash, and parts of the
+/// head too small, too round or too steep to be kept on their own (a far arrow crossed by
+/// three scan rows is a dash-like shaft and a 26-point blob). Pieces no longer than
+/// [`FRAGMENT_MAX_LENGTH_M`] — kept `unknown` candidates and dashes, and clusters dropped
+/// as tiny (≥ [`FRAGMENT_MIN_TINY_POINTS`] points), blobs or steep noise (≥
+/// [`FRAGMENT_MIN_DROPPED_POINTS`]) — that lie within [`FRAGMENT_GAP_M`] of each other
+/// (single linkage on their nearest points) form a group. A group of two or more that holds
+/// an `unknown` or dropped piece and a kept one, and whose union is no longer than
+/// [`MAX_OBJECT_LENGTH_M`], is given to each member as its `whole`, for the learned
+/// classifier to put back together when the union is one painted object (as for the pieces
+/// `peel_lines` leaves). Dashes alone never form a group: a dashed line is no object.
 fn group_fragments(
     items: &mut [(Candidate, Option<DropReason>)],
     xy: &[[f64; 2]],
@@ -606,10 +619,14 @@ fn group_fragments(
     let frag: Vec<usize> = (0..items.len())
         .filter(|&k| {
             let (c, d) = &items[k];
-            d.is_none()
-                && c.class == MarkingClass::Unknown
-                && c.whole.is_none()
-                && c.shape.length_m <= FRAGMENT_MAX_LENGTH_M
+            let offered = match d {
+                None => matches!(c.class, MarkingClass::Unknown | MarkingClass::DashedLine),
+                Some(DropReason::Tiny) => c.shape.point_count >= FRAGMENT_MIN_TINY_POINTS,
+                Some(DropReason::Blob | DropReason::SteepNoise) => {
+                    c.shape.point_count >= FRAGMENT_MIN_DROPPED_POINTS
+                }
+            };
+            offered && c.whole.is_none() && c.shape.length_m <= FRAGMENT_MAX_LENGTH_M
         })
         .collect();
     if frag.len() < 2 {
@@ -635,7 +652,16 @@ fn group_fragments(
     for (f, &k) in frag.iter().enumerate() {
         groups.entry(geom::find_root(&mut parent, f)).or_default().push(k);
     }
-    for members in groups.into_values().filter(|m| m.len() >= 2) {
+    // Dropped pieces are classed `unknown`; a group needs a kept piece to carry its whole.
+    let groups: Vec<Vec<usize>> = groups
+        .into_values()
+        .filter(|m| {
+            m.len() >= 2
+                && m.iter().any(|&k| items[k].0.class == MarkingClass::Unknown)
+                && m.iter().any(|&k| items[k].1.is_none())
+        })
+        .collect();
+    for members in groups {
         let idx: Vec<usize> = members
             .iter()
             .flat_map(|&k| items[k].0.indices.iter().copied())
@@ -1249,8 +1275,8 @@ mod tests {
         v
     }
 
-    /// Two worn pieces of one mark 0.3 m apart share one `whole` (their union); a piece
-    /// 2 m away and a dropped fragment get none.
+    /// Two worn pieces of one mark 0.3 m apart and a dropped fragment 0.3 m from them share
+    /// one `whole` (their union); a piece 2 m away gets none.
     #[test]
     fn nearby_unknown_fragments_are_offered_whole() {
         let (r, p) = (refl(), Params::default());
@@ -1286,8 +1312,62 @@ mod tests {
             items[1].0.whole.as_ref().expect("grouped"),
         );
         assert!(Arc::ptr_eq(a, b));
-        assert_eq!(a.indices.len(), groups[0].len() + groups[1].len());
-        assert!(items[2].0.whole.is_none() && items[3].0.whole.is_none());
+        assert!(Arc::ptr_eq(a, items[3].0.whole.as_ref().expect("grouped")));
+        assert_eq!(
+            a.indices.len(),
+            groups[0].len() + groups[1].len() + groups[3].len()
+        );
+        assert!(items[2].0.whole.is_none());
+    }
+
+    /// A sparsely scanned arrow: its shaft passed for a dash and its head was dropped as a
+    /// blob; 0.3 m apart they are offered whole. Two dashes 0.3 m apart are not (no
+    /// unknown piece among them), nor a dropped blob beside a dropped tiny fragment (no
+    /// kept piece to carry the whole).
+    #[test]
+    fn a_dash_like_shaft_and_a_dropped_head_are_offered_whole() {
+        let (r, p) = (refl(), Params::default());
+        let mut xy: Vec<[f64; 2]> = Vec::new();
+        let mut block = |x0: f64, x1: f64, y0: f64, y1: f64| {
+            let start = xy.len();
+            let mut x = x0;
+            while x <= x1 {
+                let mut y = y0;
+                while y <= y1 {
+                    xy.push([x, y]);
+                    y += 0.03;
+                }
+                x += 0.03;
+            }
+            (start..xy.len()).collect::<Vec<usize>>()
+        };
+        let groups = [
+            block(10.0, 12.0, 1.0, 1.15), // shaft
+            block(12.3, 12.9, 0.8, 1.4),  // head
+            block(20.0, 22.0, 1.0, 1.15), // dash
+            block(22.3, 24.3, 1.0, 1.15), // dash
+            block(30.0, 30.6, 1.0, 1.6),  // blob
+            block(30.9, 31.2, 1.0, 1.1),  // tiny
+        ];
+        let intensity = vec![100.0f32; xy.len()];
+        let mut items: Vec<(Candidate, Option<DropReason>)> = groups
+            .iter()
+            .map(|g| (describe(&xy, &intensity, g.clone(), &r, &p), None))
+            .collect();
+        for k in [0, 2, 3] {
+            items[k].0.class = MarkingClass::DashedLine;
+        }
+        items[1].1 = Some(DropReason::Blob);
+        items[4].1 = Some(DropReason::Blob);
+        items[5].1 = Some(DropReason::Tiny);
+        group_fragments(&mut items, &xy, &intensity, &r, &p);
+        let shaft = items[0].0.whole.as_ref().expect("shaft grouped");
+        assert!(Arc::ptr_eq(
+            shaft,
+            items[1].0.whole.as_ref().expect("head grouped")
+        ));
+        assert_eq!(shaft.indices.len(), groups[0].len() + groups[1].len());
+        assert!(items[2..].iter().all(|(c, _)| c.whole.is_none()));
     }
 
     /// A hatched area: four lines 2 m apart (more than the first three rounds peel) with

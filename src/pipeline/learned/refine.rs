@@ -29,8 +29,9 @@
 //!    object (`Candidate::whole`: a 9 m highway arrow's shaft passes the line test) are shown
 //!    to the network whole as well; when it names one such painted object with probability
 //!    ≥ `dash_overrule_confidence`, the pieces are replaced by the whole cluster. The same
-//!    holds for groups of nearby `unknown` fragments, whose union the classify stage
-//!    offers as their `whole` (a worn arrow or diamond in pieces).
+//!    holds for groups of nearby fragments (`unknown` pieces, a dash-like shaft, head parts
+//!    dropped as too small, round or steep), whose union the classify stage offers as their
+//!    `whole` (a worn or sparsely scanned arrow or diamond in pieces).
 //!
 //! # Parameters
 //! [`Params`]: `mode` (`auto`: run when ONNX Runtime is installed, otherwise leave the
