@@ -1130,3 +1130,37 @@ fn clip_truth(
         .collect();
     truth
 }
+
+/// A diamond worn open (its right tip gone, a C of paint 0.2 m wide) is outlined as the
+/// rhombus it was painted as, not as the band of paint: the convex hull closes the band.
+#[test]
+fn a_worn_open_diamond_is_outlined_as_its_rhombus() {
+    let (mut cloud, traj) = scan(Path { radius: None }, 60.0, &[], 9);
+    // Rhombus centred at (30, 5) with half-diagonals 1.5 m (along) and 0.75 m (across); the
+    // rim is 0.2 m wide; everything right of x = 30.3 is worn away.
+    let inside = |x: f64, y: f64, a: f64, b: f64| (x - 30.0).abs() / a + (y - 5.0).abs() / b <= 1.0;
+    let mut rim = 0;
+    for i in 0..=150 {
+        for j in 0..=75 {
+            let (x, y) = (28.5 + i as f64 * 0.02, 4.25 + j as f64 * 0.02);
+            let inner = inside(x, y, 1.5 - 0.45, 0.75 - 0.22);
+            if inside(x, y, 1.5, 0.75) && !inner && x <= 30.3 {
+                cloud.push_local(x, y, 0.0, 4e4, None, 0);
+                rim += 1;
+            }
+        }
+    }
+    let out = pipeline(&cloud, &traj);
+    let mut candidates: Vec<classify::Candidate> = out
+        .candidates
+        .into_iter()
+        .filter(|c| c.indices.len() * 2 > rim)
+        .collect();
+    assert_eq!(candidates.len(), 1, "the rim is one candidate");
+    candidates[0].class = MarkingClass::Diamond;
+    let pieces = vectorize::outlines(&cloud, &candidates, &vectorize::Params::default());
+    let area = outline::area(&pieces[0].marking.outline);
+    // The rhombus left of x = 30.3 holds 1.125 + 0.405 = 1.53 m²; the band of paint ~0.8.
+    println!("worn diamond outline area {area:.3} m² (rhombus part 1.53)");
+    assert!((1.35..=1.75).contains(&area), "area {area}");
+}

@@ -292,6 +292,22 @@ pub fn outlines(cloud: &PointCloud, candidates: &[Candidate], params: &Params) -
                     heading_deg(along),
                     None,
                 ),
+                MarkingClass::Diamond => {
+                    // A diamond is a rhombus painted as an outline (GB 5768, MUTCD): the
+                    // marking is the whole rhombus, not the band of paint around its hole
+                    // (which the alpha shape of a worn one follows, a U or a C). Where the
+                    // alpha shape is that open band, the convex hull of it closes it; an
+                    // intact diamond's alpha shape is already the rhombus (its hull would
+                    // only add the mitred corners), and a hull holding over
+                    // [`DIAMOND_MAX_HULL_RATIO`] times the paint is no rim of a diamond.
+                    let pts: Vec<[f64; 2]> = c.indices.iter().map(|&i| [cloud.x[i], cloud.y[i]]).collect();
+                    let alpha = irregular_ring(&pts, s, params);
+                    let hull = outline::convex_hull(&alpha);
+                    let (a, h) = (outline::area(&alpha), outline::area(&hull));
+                    let open_band = a < DIAMOND_OPEN_RATIO * h && h <= DIAMOND_MAX_HULL_RATIO * a;
+                    let ring = if open_band && hull.len() >= 3 { hull } else { alpha };
+                    (ring, s.length_m, s.width_m, heading_deg(along), None)
+                }
                 _ => {
                     let pts: Vec<[f64; 2]> = c.indices.iter().map(|&i| [cloud.x[i], cloud.y[i]]).collect();
                     (
@@ -1437,6 +1453,15 @@ fn lines_not_stop_lines(pieces: &mut [Piece], refl: &RefLine) {
         p.centerline = Some(axis);
     }
 }
+
+/// A diamond's alpha shape covering less than this share of its convex hull is an open
+/// band of paint (a worn rim), closed by the hull (see `outlines`).
+const DIAMOND_OPEN_RATIO: f64 = 0.8;
+
+/// Largest convex hull of a diamond's alpha shape, in multiples of the alpha shape's area,
+/// taken as its outline: the rim of a rhombus 0.2 m wide holds about half its area when
+/// intact and a fifth when half of it is worn away.
+const DIAMOND_MAX_HULL_RATIO: f64 = 5.0;
 
 /// Smallest outline area kept (m²): far below any real marking (a 0.1 m x 0.01 m sliver).
 const MIN_OUTLINE_AREA_M2: f64 = 1e-3;
