@@ -33,19 +33,13 @@
 //! O(p log p) to sort the p candidate pairs.
 
 use super::{ClassScores, Confusion, ObjectScores, Prf, ratio};
+use crate::pipeline::outline::to_polygon as polygon;
 use crate::pipeline::types::{Marking, MarkingClass};
 use geo::{Area, BooleanOps, Polygon};
 use std::collections::HashMap;
 
 /// Grid cell for candidate pairs (m).
 const CELL_M: f64 = 5.0;
-
-fn polygon(ring: &[[f64; 2]]) -> Polygon<f64> {
-    Polygon::new(
-        ring.iter().map(|p| geo::coord! {x: p[0], y: p[1]}).collect(),
-        vec![],
-    )
-}
 
 /// Intersection over union of two outlines (rings not closed), in [0, 1].
 pub fn iou(a: &[[f64; 2]], b: &[[f64; 2]]) -> f64 {

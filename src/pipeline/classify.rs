@@ -1275,25 +1275,28 @@ mod tests {
         v
     }
 
+    /// Appends points on a 3 cm grid over [x0, x1] × [y0, y1] to `xy`; their indices.
+    fn block(xy: &mut Vec<[f64; 2]>, x0: f64, x1: f64, y0: f64, y1: f64) -> Vec<usize> {
+        let start = xy.len();
+        let mut x = x0;
+        while x <= x1 {
+            let mut y = y0;
+            while y <= y1 {
+                xy.push([x, y]);
+                y += 0.03;
+            }
+            x += 0.03;
+        }
+        (start..xy.len()).collect()
+    }
+
     /// Two worn pieces of one mark 0.3 m apart and a dropped fragment 0.3 m from them share
     /// one `whole` (their union); a piece 2 m away gets none.
     #[test]
     fn nearby_unknown_fragments_are_offered_whole() {
         let (r, p) = (refl(), Params::default());
         let mut xy: Vec<[f64; 2]> = Vec::new();
-        let mut block = |x0: f64, x1: f64, y0: f64, y1: f64| {
-            let start = xy.len();
-            let mut x = x0;
-            while x <= x1 {
-                let mut y = y0;
-                while y <= y1 {
-                    xy.push([x, y]);
-                    y += 0.03;
-                }
-                x += 0.03;
-            }
-            (start..xy.len()).collect::<Vec<usize>>()
-        };
+        let mut block = |x0, x1, y0, y1| block(&mut xy, x0, x1, y0, y1);
         let groups = [
             block(10.0, 11.0, 1.0, 1.5),
             block(11.3, 12.0, 1.2, 1.8),
@@ -1328,19 +1331,7 @@ mod tests {
     fn a_dash_like_shaft_and_a_dropped_head_are_offered_whole() {
         let (r, p) = (refl(), Params::default());
         let mut xy: Vec<[f64; 2]> = Vec::new();
-        let mut block = |x0: f64, x1: f64, y0: f64, y1: f64| {
-            let start = xy.len();
-            let mut x = x0;
-            while x <= x1 {
-                let mut y = y0;
-                while y <= y1 {
-                    xy.push([x, y]);
-                    y += 0.03;
-                }
-                x += 0.03;
-            }
-            (start..xy.len()).collect::<Vec<usize>>()
-        };
+        let mut block = |x0, x1, y0, y1| block(&mut xy, x0, x1, y0, y1);
         let groups = [
             block(10.0, 12.0, 1.0, 1.15), // shaft
             block(12.3, 12.9, 0.8, 1.4),  // head

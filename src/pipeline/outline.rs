@@ -253,22 +253,32 @@ pub fn grown(ring: &[[f64; 2]], d: f64) -> Vec<[f64; 2]> {
     if d <= 0.0 || ring.len() < 3 {
         return ring.to_vec();
     }
-    let mut coords: Vec<geo::Coord<f64>> = ring.iter().map(|p| geo::coord! {x: p[0], y: p[1]}).collect();
-    coords.push(coords[0]);
-    let poly = geo::Polygon::new(geo::LineString::new(coords), vec![]);
-    let mp = poly.buffer_with_style(BufferStyle::new(d).line_join(LineJoin::Miter(2.0)));
-    let best = mp.0.iter().max_by(|a, b| {
-        use geo::Area;
-        a.unsigned_area().total_cmp(&b.unsigned_area())
-    });
-    let Some(best) = best else {
-        return ring.to_vec();
-    };
+    let mp = to_polygon(ring).buffer_with_style(BufferStyle::new(d).line_join(LineJoin::Miter(2.0)));
+    match largest_exterior(&mp) {
+        Some(out) if out.len() >= 3 => out,
+        _ => ring.to_vec(),
+    }
+}
+
+/// A ring (not closed) as a geo polygon without holes.
+pub fn to_polygon(ring: &[[f64; 2]]) -> geo::Polygon<f64> {
+    geo::Polygon::new(
+        ring.iter().map(|p| geo::coord! {x: p[0], y: p[1]}).collect(),
+        vec![],
+    )
+}
+
+/// The exterior ring (not closed) of the largest polygon of `mp`; `None` when it is empty.
+fn largest_exterior(mp: &geo::MultiPolygon<f64>) -> Option<Vec<[f64; 2]>> {
+    use geo::Area;
+    let best =
+        mp.0.iter()
+            .max_by(|a, b| a.unsigned_area().total_cmp(&b.unsigned_area()))?;
     let mut out: Vec<[f64; 2]> = best.exterior().coords().map(|c| [c.x, c.y]).collect();
     if out.len() > 1 && out[0] == out[out.len() - 1] {
         out.pop();
     }
-    if out.len() < 3 { ring.to_vec() } else { out }
+    Some(out)
 }
 
 /// A polygon around an open centreline at `half_width` on both sides (mitred joins,
@@ -332,19 +342,7 @@ pub fn buffered_line_simple(line: &[[f64; 2]], half_width: f64) -> Vec<[f64; 2]>
     let style = BufferStyle::new(half_width)
         .line_cap(LineCap::Butt)
         .line_join(LineJoin::Miter(2.0));
-    let mp = ls.buffer_with_style(style);
-    let best = mp.0.iter().max_by(|a, b| {
-        use geo::Area;
-        a.unsigned_area().total_cmp(&b.unsigned_area())
-    });
-    let Some(poly) = best else {
-        return Vec::new();
-    };
-    let mut out: Vec<[f64; 2]> = poly.exterior().coords().map(|c| [c.x, c.y]).collect();
-    if out.len() > 1 && out[0] == out[out.len() - 1] {
-        out.pop();
-    }
-    out
+    largest_exterior(&ls.buffer_with_style(style)).unwrap_or_default()
 }
 
 /// True when the closed ring (not repeated first vertex) has no two non-adjacent edges

@@ -1476,16 +1476,11 @@ const GUIDELINE_GROUP_M: f64 = 3.0;
 /// guidelines were lone and 6 of 92 true ones).
 fn lone_guidelines(pieces: &[Piece]) -> Vec<usize> {
     use geo::Distance;
-    let poly = |r: &[[f64; 2]]| {
-        let mut c: Vec<geo::Coord<f64>> = r.iter().map(|p| geo::coord! {x: p[0], y: p[1]}).collect();
-        c.push(c[0]);
-        geo::Polygon::new(geo::LineString::new(c), vec![])
-    };
     let stripes: Vec<(usize, geo::Polygon<f64>)> = pieces
         .iter()
         .enumerate()
         .filter(|(_, p)| p.marking.class == MarkingClass::Guideline && p.marking.outline.len() >= 3)
-        .map(|(k, p)| (k, poly(&p.marking.outline)))
+        .map(|(k, p)| (k, outline::to_polygon(&p.marking.outline)))
         .collect();
     stripes
         .iter()
