@@ -276,6 +276,7 @@ fn candidate(
         confidence,
         line: None,
         whole: None,
+        group: None,
     }
 }
 
@@ -440,6 +441,22 @@ fn a_confident_dash_is_overruled_only_into_a_painted_object_the_network_is_sure_
     assert_eq!(lone[0].class, MarkingClass::DashedLine);
 }
 
+/// A straight drive along +x from x = −20 to 40, 3.5 m to the right of y = 0.
+fn drive_along_x() -> Trajectory {
+    let poses: Vec<Pose> = (0..=60)
+        .map(|i| Pose {
+            time: i as f64,
+            x: i as f64 - 20.0,
+            y: -3.5,
+            z: 0.0,
+            heading_deg: None,
+            roll_deg: None,
+            pitch_deg: None,
+        })
+        .collect();
+    Trajectory::new(poses).unwrap()
+}
+
 #[test]
 fn a_long_arrow_the_rules_peeled_apart_is_put_back_together() {
     // GB 5768 highway straight arrow (9 m) in a lane beside a straight drive along +x.
@@ -454,18 +471,7 @@ fn a_long_arrow_the_rules_peeled_apart_is_put_back_together() {
         &mut cloud,
         &markings::arrow(ArrowKind::Straight, &frame, st.arrow_len_highway),
     );
-    let poses: Vec<Pose> = (0..=60)
-        .map(|i| Pose {
-            time: i as f64,
-            x: i as f64 - 20.0,
-            y: -3.5,
-            z: 0.0,
-            heading_deg: None,
-            roll_deg: None,
-            pitch_deg: None,
-        })
-        .collect();
-    let traj = Trajectory::new(poses).unwrap();
+    let traj = drive_along_x();
     let clusters = cluster::run(&cloud, &cluster::Params::default());
     assert_eq!(clusters.len(), 1);
     let mut cands = classify::run(&cloud, &clusters, &traj, &classify::Params::default());
@@ -585,4 +591,50 @@ fn refine_overhead() {
         stats.examined, stats.reclassified
     );
     println!("candidate class accuracy: geometric {before:.3}, after refine {after:.3}");
+}
+
+/// A highway straight-right arrow whose turning branch broke off the shaft at a worn spot
+/// (its first 0.28 m beside the shaft gone): two clusters, the shaft and straight head
+/// (which the rules peel apart; alone a straight arrow, p 0.98) and the branch 0.28 m
+/// away. The classify stage groups them and the network names the group the straight-right
+/// arrow it is (p ≥ 0.8); the pieces are put back together.
+#[test]
+fn an_arrow_whose_branch_wore_off_the_shaft_is_put_back_together() {
+    let mut full = PointCloud::with_origin([500_000.0, 4_000_000.0, 10.0]);
+    let st = Standard::parse("gb").unwrap();
+    let len = st.arrow_len_highway;
+    let frame = Frame2 {
+        o: [10.0, 0.0],
+        u: [1.0, 0.0],
+        v: [0.0, 1.0],
+    };
+    let all = fill_marking(&mut full, &markings::arrow(ArrowKind::StraightRight, &frame, len));
+    // The shaft's half width, from its tail.
+    let h = all
+        .iter()
+        .filter(|&&i| full.x[i] < 11.0)
+        .map(|&i| full.y[i].abs())
+        .fold(0.0, f64::max);
+    let worn = |i: usize| {
+        let (u, v) = (full.x[i] - 10.0, full.y[i]);
+        u < 0.6 * len && v < -h && v > -h - 0.28
+    };
+    let kept: Vec<usize> = all.iter().copied().filter(|&i| !worn(i)).collect();
+    assert!(kept.len() < all.len());
+    let cloud = full.select(&kept);
+    let traj = drive_along_x();
+    let clusters = cluster::run(&cloud, &cluster::Params::default());
+    assert_eq!(clusters.len(), 2, "shaft and head, and the branch");
+    let mut cands = classify::run(&cloud, &clusters, &traj, &classify::Params::default());
+    assert!(cands.iter().any(|c| c.group.is_some()));
+    let params = refine::Params {
+        mode: refine::Mode::On,
+        ..refine::Params::default()
+    };
+    refine::refine(&mut cands, &cloud, &params).unwrap();
+    let classes: Vec<_> = cands.iter().map(|c| (c.class, c.indices.len())).collect();
+    assert_eq!(cands.len(), 1, "{classes:?}");
+    assert_eq!(cands[0].class, MarkingClass::StraightRightArrow, "{classes:?}");
+    assert_eq!(cands[0].indices.len(), cloud.len());
+    assert!(cands[0].confidence >= 0.8);
 }

@@ -280,6 +280,11 @@ pub struct Candidate {
     /// (`learned::refine`) puts the cluster back together when it names it one painted object.
     #[serde(skip)]
     pub whole: Option<Arc<Candidate>>,
+    /// For a piece of a group of nearby fragments that holds such a peeled cluster (see
+    /// `group_fragments`): the union of the group, offered after `whole` (an arrow's turning
+    /// branch that broke off at a worn spot lies beside its peeled shaft and head).
+    #[serde(skip)]
+    pub group: Option<Arc<Candidate>>,
 }
 
 /// Longest single painted object (m): GB 5768 highway arrows are 9 m, MUTCD arrows ≤ 7.3 m.
@@ -423,6 +428,7 @@ fn describe(
         shape,
         line,
         whole: None,
+        group: None,
     }
 }
 
@@ -603,12 +609,17 @@ const FRAGMENT_MAX_LENGTH_M: f64 = 6.0;
 /// three scan rows is a dash-like shaft and a 26-point blob). Pieces no longer than
 /// [`FRAGMENT_MAX_LENGTH_M`] — kept `unknown` candidates and dashes, and clusters dropped
 /// as tiny (≥ [`FRAGMENT_MIN_TINY_POINTS`] points), blobs or steep noise (≥
-/// [`FRAGMENT_MIN_DROPPED_POINTS`]) — that lie within [`FRAGMENT_GAP_M`] of each other
-/// (single linkage on their nearest points) form a group. A group of two or more that holds
-/// an `unknown` or dropped piece and a kept one, and whose union is no longer than
-/// [`MAX_OBJECT_LENGTH_M`], is given to each member as its `whole`, for the learned
-/// classifier to put back together when the union is one painted object (as for the pieces
-/// `peel_lines` leaves). Dashes alone never form a group: a dashed line is no object.
+/// [`FRAGMENT_MIN_DROPPED_POINTS`]) — and the clusters `peel_lines` took apart (each one
+/// unit: its whole, standing for all its pieces) that lie within [`FRAGMENT_GAP_M`] of each
+/// other (single linkage on their nearest points) form a group. A group of two or more
+/// units that holds an `unknown` or dropped piece or a peeled cluster, and a kept piece,
+/// and whose union is no longer than [`MAX_OBJECT_LENGTH_M`], is given to each member as
+/// its `whole`, for the learned classifier to put back together when the union is one
+/// painted object — or, when the group holds a peeled cluster, to each member (of a peeled
+/// cluster: to each of its pieces) as its `group`, offered when the peeled cluster alone is
+/// no painted object (an arrow whose turning branch broke off its shaft at a worn spot is
+/// a peeled shaft-and-head cluster and a branch beside it). Dashes alone never form a
+/// group: a dashed line is no object.
 fn group_fragments(
     items: &mut [(Candidate, Option<DropReason>)],
     xy: &[[f64; 2]],
@@ -616,63 +627,90 @@ fn group_fragments(
     refl: &RefLine,
     p: &Params,
 ) {
-    let frag: Vec<usize> = (0..items.len())
-        .filter(|&k| {
-            let (c, d) = &items[k];
-            let offered = match d {
-                None => matches!(c.class, MarkingClass::Unknown | MarkingClass::DashedLine),
-                Some(DropReason::Tiny) => c.shape.point_count >= FRAGMENT_MIN_TINY_POINTS,
-                Some(DropReason::Blob | DropReason::SteepNoise) => {
-                    c.shape.point_count >= FRAGMENT_MIN_DROPPED_POINTS
-                }
-            };
-            offered && c.whole.is_none() && c.shape.length_m <= FRAGMENT_MAX_LENGTH_M
-        })
-        .collect();
-    if frag.len() < 2 {
+    // Units: a peeled cluster (its whole and its pieces) or one offered fragment.
+    let mut units: Vec<(Option<Arc<Candidate>>, Vec<usize>)> = Vec::new();
+    for (k, (c, d)) in items.iter().enumerate() {
+        if let Some(w) = &c.whole {
+            match units
+                .iter_mut()
+                .find(|(x, _)| x.as_ref().is_some_and(|x| Arc::ptr_eq(x, w)))
+            {
+                Some((_, members)) => members.push(k),
+                None => units.push((Some(Arc::clone(w)), vec![k])),
+            }
+            continue;
+        }
+        let offered = match d {
+            None => matches!(c.class, MarkingClass::Unknown | MarkingClass::DashedLine),
+            Some(DropReason::Tiny) => c.shape.point_count >= FRAGMENT_MIN_TINY_POINTS,
+            Some(DropReason::Blob | DropReason::SteepNoise) => {
+                c.shape.point_count >= FRAGMENT_MIN_DROPPED_POINTS
+            }
+        };
+        if offered && c.shape.length_m <= FRAGMENT_MAX_LENGTH_M {
+            units.push((None, vec![k]));
+        }
+    }
+    if units.len() < 2 {
         return;
     }
-    // Single linkage on the nearest points: components of the fragments' points at the
-    // gap; a fragment is one set with every fragment that shares a component with it.
+    let unit_points: Vec<&[usize]> = units
+        .iter()
+        .map(|(w, members)| match w {
+            Some(w) => &w.indices[..],
+            None => &items[members[0]].0.indices[..],
+        })
+        .collect();
+    // Single linkage on the nearest points: components of the units' points at the gap;
+    // a unit is one set with every unit that shares a component with it.
     let mut owner: Vec<usize> = Vec::new();
     let mut pts: Vec<[f64; 2]> = Vec::new();
-    for (f, &k) in frag.iter().enumerate() {
-        for &i in &items[k].0.indices {
+    for (f, u) in unit_points.iter().enumerate() {
+        for &i in u.iter() {
             owner.push(f);
             pts.push(xy[i]);
         }
     }
-    let mut parent: Vec<usize> = (0..frag.len()).collect();
+    let mut parent: Vec<usize> = (0..units.len()).collect();
     for comp in geom::components(&pts, FRAGMENT_GAP_M) {
         for w in comp.windows(2) {
             geom::union(&mut parent, owner[w[0]], owner[w[1]]);
         }
     }
     let mut groups: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
-    for (f, &k) in frag.iter().enumerate() {
-        groups.entry(geom::find_root(&mut parent, f)).or_default().push(k);
+    for f in 0..units.len() {
+        groups.entry(geom::find_root(&mut parent, f)).or_default().push(f);
     }
     // Dropped pieces are classed `unknown`; a group needs a kept piece to carry its whole.
-    let groups: Vec<Vec<usize>> = groups
-        .into_values()
-        .filter(|m| {
-            m.len() >= 2
-                && m.iter().any(|&k| items[k].0.class == MarkingClass::Unknown)
-                && m.iter().any(|&k| items[k].1.is_none())
-        })
-        .collect();
-    for members in groups {
-        let idx: Vec<usize> = members
-            .iter()
-            .flat_map(|&k| items[k].0.indices.iter().copied())
-            .collect();
-        let union = describe(xy, intensity, idx, refl, p);
-        if union.shape.length_m > MAX_OBJECT_LENGTH_M {
+    let mut wholes: Vec<(Vec<usize>, Candidate, bool)> = Vec::new();
+    for group in groups.into_values().filter(|g| g.len() >= 2) {
+        let members: Vec<usize> = group.iter().flat_map(|&f| units[f].1.iter().copied()).collect();
+        let suspect = group.iter().any(|&f| units[f].0.is_some())
+            || members.iter().any(|&k| items[k].0.class == MarkingClass::Unknown);
+        if !suspect || !members.iter().any(|&k| items[k].1.is_none()) {
             continue;
         }
-        let whole = Arc::new(union);
+        let mut idx: Vec<usize> = group
+            .iter()
+            .flat_map(|&f| unit_points[f].iter().copied())
+            .collect();
+        idx.sort_unstable();
+        idx.dedup();
+        let union = describe(xy, intensity, idx, refl, p);
+        if union.shape.length_m <= MAX_OBJECT_LENGTH_M {
+            let peeled = group.iter().any(|&f| units[f].0.is_some());
+            wholes.push((members, union, peeled));
+        }
+    }
+    drop(unit_points);
+    for (members, union, peeled) in wholes {
+        let union = Some(Arc::new(union));
         for &k in &members {
-            items[k].0.whole = Some(Arc::clone(&whole));
+            if peeled {
+                items[k].0.group.clone_from(&union);
+            } else {
+                items[k].0.whole.clone_from(&union);
+            }
         }
     }
 }

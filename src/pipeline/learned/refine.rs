@@ -31,7 +31,11 @@
 //!    ≥ `dash_overrule_confidence`, the pieces are replaced by the whole cluster. The same
 //!    holds for groups of nearby fragments (`unknown` pieces, a dash-like shaft, head parts
 //!    dropped as too small, round or steep), whose union the classify stage offers as their
-//!    `whole` (a worn or sparsely scanned arrow or diamond in pieces).
+//!    `whole` (a worn or sparsely scanned arrow or diamond in pieces). A group that holds
+//!    a peeled cluster is offered as the pieces' `group`: when the network names it an
+//!    arrow or a diamond with that probability, it replaces the peeled clusters in it (a
+//!    straight arrow and the turning branch that wore off its shaft are one
+//!    straight-and-turn arrow).
 //!
 //! # Parameters
 //! [`Params`]: `mode` (`auto`: run when ONNX Runtime is installed, otherwise leave the
@@ -155,15 +159,12 @@ pub fn refine_with(
         .map(|(i, _)| i)
         .collect();
     // The short clusters the classify stage peeled lines off, each once, with the
-    // candidates (pieces) peeled off it.
-    let mut wholes: Vec<(Arc<Candidate>, Vec<usize>)> = Vec::new();
-    for (i, c) in candidates.iter().enumerate() {
-        let Some(w) = &c.whole else { continue };
-        match wholes.iter_mut().find(|(x, _)| Arc::ptr_eq(x, w)) {
-            Some((_, pieces)) => pieces.push(i),
-            None => wholes.push((Arc::clone(w), vec![i])),
-        }
-    }
+    // candidates (pieces) peeled off it; then the groups of fragments that hold such a
+    // cluster, likewise.
+    let wholes = shared_unions(candidates, |c| c.whole.as_ref());
+    let groups = shared_unions(candidates, |c| c.group.as_ref());
+    let n_wholes = wholes.len();
+    let wholes: Vec<(Arc<Candidate>, Vec<usize>)> = wholes.into_iter().chain(groups).collect();
     if selected.is_empty() && wholes.is_empty() {
         return Ok(RefineStats::default());
     }
@@ -207,17 +208,32 @@ pub fn refine_with(
         }
     }
     // A peeled cluster the network names one painted object is put back together: its
-    // first piece becomes the whole cluster, the other pieces go.
-    let mut keep = vec![true; candidates.len()];
-    for ((w, pieces), pred) in wholes.iter().zip(whole_preds) {
-        let top = pred.prob(pred.class) as f64;
-        if !painted_object(pred.class) || top < overrule {
+    // first piece becomes the whole cluster, the other pieces go. A group of fragments
+    // that holds peeled clusters is put together instead when the network names it an
+    // arrow or a diamond (what falls apart into such pieces; a union of a stop line and
+    // an arrow beside it is no stop line): a straight arrow beside a lone turning branch
+    // is a straight-and-turn arrow.
+    let mut chosen: Vec<usize> = Vec::new();
+    for (u, ((_, pieces), pred)) in wholes.iter().zip(whole_preds).enumerate() {
+        if !painted_object(pred.class) || (pred.prob(pred.class) as f64) < overrule {
             continue;
         }
+        if u >= n_wholes {
+            if !(pred.class.is_arrow() || pred.class == MarkingClass::Diamond) {
+                continue;
+            }
+            chosen.retain(|&v| !wholes[v].1.iter().any(|i| pieces.contains(i)));
+        }
+        chosen.push(u);
+    }
+    let mut keep = vec![true; candidates.len()];
+    for u in chosen {
+        let ((w, pieces), pred) = (&wholes[u], &whole_preds[u]);
         candidates[pieces[0]] = Candidate {
             class: pred.class,
-            confidence: top,
+            confidence: pred.prob(pred.class) as f64,
             whole: None,
+            group: None,
             ..Candidate::clone(w)
         };
         pieces[1..].iter().for_each(|&i| keep[i] = false);
@@ -226,6 +242,23 @@ pub fn refine_with(
     let mut keep = keep.into_iter();
     candidates.retain(|_| keep.next().unwrap_or(true));
     Ok(stats)
+}
+
+/// The distinct unions `of` the candidates point to (in order of first appearance), each
+/// with the candidates that point to it.
+fn shared_unions(
+    candidates: &[Candidate],
+    of: impl Fn(&Candidate) -> Option<&Arc<Candidate>>,
+) -> Vec<(Arc<Candidate>, Vec<usize>)> {
+    let mut out: Vec<(Arc<Candidate>, Vec<usize>)> = Vec::new();
+    for (i, c) in candidates.iter().enumerate() {
+        let Some(w) = of(c) else { continue };
+        match out.iter_mut().find(|(x, _)| Arc::ptr_eq(x, w)) {
+            Some((_, pieces)) => pieces.push(i),
+            None => out.push((Arc::clone(w), vec![i])),
+        }
+    }
+    out
 }
 
 /// A painted object other than a line or a crosswalk stripe: what the network may make of
