@@ -20,7 +20,9 @@
 //!    a canonical order (by coordinates) first, so the clusters do not depend on where the
 //!    chunk edges fell. Clusters longer than `PIECE_M` along the trajectory are cut at
 //!    global multiples of it (solid-line pieces; the lane-line stage joins them), which
-//!    bounds the memory of open clusters on endless solid lines.
+//!    bounds the memory of open clusters on endless solid lines. Complete short clusters
+//!    linked to an open one (points ≤ `LINK_M` apart, directly or through each other)
+//!    wait for it, so the pieces of one painted object go to step 4 together.
 //! 4. *classify* + *vectorize* complete clusters into markings (absolute coordinates),
 //!    then lane lines are linked once over all markings.
 //!
@@ -32,7 +34,7 @@ use super::error::PipelineError;
 use super::params::ValidParams;
 use super::types::{Crs, Extraction, PointCloud, StationIndex, Trajectory};
 use super::{
-    Inputs, Progress, classify, cluster, io, observed, pavement, pavement_verge, rasterize, threshold,
+    Inputs, Progress, classify, cluster, geom, io, observed, pavement, pavement_verge, rasterize, threshold,
     vectorize,
 };
 use rayon::prelude::*;
@@ -618,6 +620,9 @@ pub struct Streaming {
     /// Per open point: its cluster was already longer than [`PIECE_M`] (so it is cut at
     /// the piece grid even if the rest alone is shorter).
     open_long: Vec<bool>,
+    /// Complete short clusters held back because they lie within [`LINK_M`] of an open
+    /// cluster (see [`Streaming::feed`]).
+    deferred: Vec<Complete>,
 }
 
 impl Streaming {
@@ -661,6 +666,7 @@ impl Streaming {
         let groups = cluster(&all, params);
 
         let mut complete = Vec::new();
+        let mut short = std::mem::take(&mut self.deferred);
         let mut keep: Vec<usize> = Vec::new();
         let mut long_groups: Vec<Vec<usize>> = Vec::new();
         for g in groups {
@@ -670,7 +676,11 @@ impl Streaming {
             let open = frontier.is_some_and(|f| hi >= f - JOIN_MARGIN_M);
             if !open {
                 // Complete: cut at the piece grid when long.
-                complete.extend(pieces(&all, &all_m, &g, long));
+                if long {
+                    complete.extend(pieces(&all, &all_m, &g, true));
+                } else {
+                    short.extend(pieces(&all, &all_m, &g, false));
+                }
                 continue;
             }
             let f = frontier.expect("open implies a frontier");
@@ -695,9 +705,52 @@ impl Streaming {
             }
         }
         self.open_long = keep.iter().map(|&i| long_pt[i]).collect();
-        self.open = Some(all.select(&keep));
+        let open = all.select(&keep);
+        // Short clusters beside an open one wait for it, so the pieces of one painted
+        // object that fell into several clusters (an arrow's branch that touches an edge
+        // line and broke off its shaft) reach the classify stage in one batch, which
+        // groups such pieces (`classify::group_fragments`).
+        let wait = linked_to(&open, &short);
+        for (c, wait) in short.into_iter().zip(wait) {
+            if wait {
+                self.deferred.push(c);
+            } else {
+                complete.push(c);
+            }
+        }
+        self.open = Some(open);
         complete
     }
+}
+
+/// Clusters this close (m, nearest points) to an open cluster wait for it (see
+/// [`Streaming::feed`]); the gap of `classify::group_fragments`.
+const LINK_M: f64 = 0.5;
+
+/// Per cluster: whether it is linked to `open` through points at most [`LINK_M`] apart
+/// (directly or through other clusters).
+fn linked_to(open: &PointCloud, clusters: &[Complete]) -> Vec<bool> {
+    if open.is_empty() || clusters.is_empty() {
+        return vec![false; clusters.len()];
+    }
+    // Points: the open ones first, then each cluster's, with their owner (None: open).
+    let mut xy: Vec<[f64; 2]> = open.x.iter().zip(&open.y).map(|(&x, &y)| [x, y]).collect();
+    let mut owner: Vec<Option<usize>> = vec![None; xy.len()];
+    for (k, c) in clusters.iter().enumerate() {
+        xy.extend(c.points.x.iter().zip(&c.points.y).map(|(&x, &y)| [x, y]));
+        owner.resize(xy.len(), Some(k));
+    }
+    let mut wait = vec![false; clusters.len()];
+    for comp in geom::components(&xy, LINK_M) {
+        if comp.iter().any(|&i| owner[i].is_none()) {
+            for &i in &comp {
+                if let Some(k) = owner[i] {
+                    wait[k] = true;
+                }
+            }
+        }
+    }
+    wait
 }
 
 /// A group as one complete cluster, or cut into pieces at multiples of [`PIECE_M`].
@@ -836,6 +889,50 @@ mod tests {
             lo = hi;
         }
         signature(&done)
+    }
+
+    /// An arrow beside an edge line: its turning branch touches the line (so it is part of
+    /// the line's cluster, which runs on and completes piece by piece), its shaft lies 0.4
+    /// m from the branch. The shaft waits for the line piece that holds the branch, so both
+    /// reach the classify stage in one batch; without the wait it went four feeds earlier.
+    #[test]
+    fn a_cluster_beside_an_open_one_completes_with_it() {
+        let mut pts = Vec::new();
+        for i in 0..30_000 {
+            pts.push((i as f64 * 0.02, 0.0));
+        }
+        for i in 1..=50 {
+            pts.push((100.0, i as f64 * 0.02)); // branch, on the line
+        }
+        for i in 0..=150 {
+            pts.push((100.0 + i as f64 * 0.02, 1.4)); // shaft
+        }
+        let params = Params::default().validate().unwrap();
+        let mut st = Streaming::default();
+        let (mut shaft_feed, mut branch_feed) = (None, None);
+        let mut lo = 0.0;
+        for feed in 0.. {
+            let hi = lo + 40.0;
+            let sel: Vec<(f64, f64)> = pts.iter().copied().filter(|p| p.0 >= lo && p.0 < hi).collect();
+            let m: Vec<f64> = sel.iter().map(|p| p.0).collect();
+            let last = hi > 600.0;
+            for c in st.feed(cloud(&sel), m, (!last).then_some(hi), cluster_groups, &params) {
+                if c.points.y.iter().all(|&y| (y - 1.4).abs() < 1e-3) {
+                    shaft_feed = Some(feed);
+                }
+                if c.points.y.iter().any(|&y| (y - 1.0).abs() < 1e-3) {
+                    branch_feed = Some(feed);
+                }
+            }
+            if last {
+                break;
+            }
+            lo = hi;
+        }
+        // The line's first piece (0-250 m, with the branch) completes once the frontier is
+        // past 252.5 m: the feed of the chunk 240-280 m.
+        assert_eq!(branch_feed, Some(6));
+        assert_eq!(shaft_feed, branch_feed);
     }
 
     #[test]
