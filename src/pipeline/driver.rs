@@ -810,6 +810,7 @@ fn finish_clusters(
     let (mut candidates, fragments) = classify::run_with_fragments(&cloud, &clusters, traj, &p.classify);
     // The learned classifier takes the candidates the geometric rules could not decide.
     super::learned::refine(&mut candidates, &cloud, &p.learned)?;
+    classify::drop_thin_strokes(&mut candidates, &p.classify);
     ctx.stats.add(5, t0);
     let t0 = Instant::now();
     let mut pieces = vectorize::outlines(&cloud, &candidates, &p.vectorize);
