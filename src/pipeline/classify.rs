@@ -654,18 +654,12 @@ fn group_fragments(
     p: &Params,
 ) {
     // Units: a peeled cluster (its whole and its pieces) or one offered fragment.
-    let mut units: Vec<(Option<Arc<Candidate>>, Vec<usize>)> = Vec::new();
+    let mut units: Vec<(Option<Arc<Candidate>>, Vec<usize>)> =
+        shared_unions(items, |(c, _)| c.whole.as_ref())
+            .into_iter()
+            .map(|(w, members)| (Some(w), members))
+            .collect();
     for (k, (c, d)) in items.iter().enumerate() {
-        if let Some(w) = &c.whole {
-            match units
-                .iter_mut()
-                .find(|(x, _)| x.as_ref().is_some_and(|x| Arc::ptr_eq(x, w)))
-            {
-                Some((_, members)) => members.push(k),
-                None => units.push((Some(Arc::clone(w)), vec![k])),
-            }
-            continue;
-        }
         let offered = match d {
             None => matches!(c.class, MarkingClass::Unknown | MarkingClass::DashedLine),
             Some(DropReason::Tiny) => c.shape.point_count >= FRAGMENT_MIN_TINY_POINTS,
@@ -673,7 +667,7 @@ fn group_fragments(
                 c.shape.point_count >= FRAGMENT_MIN_DROPPED_POINTS
             }
         };
-        if offered && c.shape.length_m <= FRAGMENT_MAX_LENGTH_M {
+        if c.whole.is_none() && offered && c.shape.length_m <= FRAGMENT_MAX_LENGTH_M {
             units.push((None, vec![k]));
         }
     }
@@ -711,8 +705,8 @@ fn group_fragments(
     let mut wholes: Vec<(Vec<usize>, Candidate, bool)> = Vec::new();
     for group in groups.into_values().filter(|g| g.len() >= 2) {
         let members: Vec<usize> = group.iter().flat_map(|&f| units[f].1.iter().copied()).collect();
-        let suspect = group.iter().any(|&f| units[f].0.is_some())
-            || members.iter().any(|&k| items[k].0.class == MarkingClass::Unknown);
+        let peeled = group.iter().any(|&f| units[f].0.is_some());
+        let suspect = peeled || members.iter().any(|&k| items[k].0.class == MarkingClass::Unknown);
         if !suspect || !members.iter().any(|&k| items[k].1.is_none()) {
             continue;
         }
@@ -724,7 +718,6 @@ fn group_fragments(
         idx.dedup();
         let union = describe(xy, intensity, idx, refl, p);
         if union.shape.length_m <= MAX_OBJECT_LENGTH_M {
-            let peeled = group.iter().any(|&f| units[f].0.is_some());
             wholes.push((members, union, peeled));
         }
     }
@@ -739,6 +732,23 @@ fn group_fragments(
             }
         }
     }
+}
+
+/// The distinct unions (`whole` or `group`) that `of` finds on the items, in order of
+/// first appearance, each with the indices of the items that point to it.
+pub fn shared_unions<T>(
+    items: &[T],
+    of: impl Fn(&T) -> Option<&Arc<Candidate>>,
+) -> Vec<(Arc<Candidate>, Vec<usize>)> {
+    let mut out: Vec<(Arc<Candidate>, Vec<usize>)> = Vec::new();
+    for (i, item) in items.iter().enumerate() {
+        let Some(w) = of(item) else { continue };
+        match out.iter_mut().find(|(x, _)| Arc::ptr_eq(x, w)) {
+            Some((_, members)) => members.push(i),
+            None => out.push((Arc::clone(w), vec![i])),
+        }
+    }
+    out
 }
 
 /// Split painted lines off a long cluster that is not one line (see `assess`): in the
@@ -1406,6 +1416,20 @@ mod tests {
         assert_eq!(cands[2].class, MarkingClass::DashedLine);
     }
 
+    /// Each group of points described as a kept candidate (no drop reason).
+    fn kept(
+        xy: &[[f64; 2]],
+        intensity: &[f32],
+        groups: &[Vec<usize>],
+        r: &RefLine,
+        p: &Params,
+    ) -> Vec<(Candidate, Option<DropReason>)> {
+        groups
+            .iter()
+            .map(|g| (describe(xy, intensity, g.clone(), r, p), None))
+            .collect()
+    }
+
     /// Two worn pieces of one mark 0.3 m apart and a dropped fragment 0.3 m from them share
     /// one `whole` (their union); a piece 2 m away gets none.
     #[test]
@@ -1420,10 +1444,7 @@ mod tests {
             block(12.3, 12.6, 1.0, 1.3),
         ];
         let intensity = vec![100.0f32; xy.len()];
-        let mut items: Vec<(Candidate, Option<DropReason>)> = groups
-            .iter()
-            .map(|g| (describe(&xy, &intensity, g.clone(), &r, &p), None))
-            .collect();
+        let mut items = kept(&xy, &intensity, &groups, &r, &p);
         items[3].1 = Some(DropReason::Tiny);
         group_fragments(&mut items, &xy, &intensity, &r, &p);
         let (a, b) = (
@@ -1457,10 +1478,7 @@ mod tests {
             block(30.9, 31.2, 1.0, 1.1),  // tiny
         ];
         let intensity = vec![100.0f32; xy.len()];
-        let mut items: Vec<(Candidate, Option<DropReason>)> = groups
-            .iter()
-            .map(|g| (describe(&xy, &intensity, g.clone(), &r, &p), None))
-            .collect();
+        let mut items = kept(&xy, &intensity, &groups, &r, &p);
         for k in [0, 2, 3] {
             items[k].0.class = MarkingClass::DashedLine;
         }

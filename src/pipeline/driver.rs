@@ -733,12 +733,26 @@ fn linked_to(open: &PointCloud, clusters: &[Complete]) -> Vec<bool> {
     if open.is_empty() || clusters.is_empty() {
         return vec![false; clusters.len()];
     }
-    // Points: the open ones first, then each cluster's, with their owner (None: open).
-    let mut xy: Vec<[f64; 2]> = open.x.iter().zip(&open.y).map(|(&x, &y)| [x, y]).collect();
-    let mut owner: Vec<Option<usize>> = vec![None; xy.len()];
+    // Points: each cluster's with its owner, then the open ones (None) that lie in a
+    // LINK_M cell next to a cluster point's: only those can link a cluster to the open
+    // ones, and the open clusters hold up to PIECE_M of every line.
+    let cell = |x: f64, y: f64| (geom::floor_i64(x / LINK_M), geom::floor_i64(y / LINK_M));
+    let mut xy: Vec<[f64; 2]> = Vec::new();
+    let mut owner: Vec<Option<usize>> = Vec::new();
+    let mut near = std::collections::HashSet::new();
     for (k, c) in clusters.iter().enumerate() {
-        xy.extend(c.points.x.iter().zip(&c.points.y).map(|(&x, &y)| [x, y]));
-        owner.resize(xy.len(), Some(k));
+        for (&x, &y) in c.points.x.iter().zip(&c.points.y) {
+            xy.push([x, y]);
+            owner.push(Some(k));
+            let (cx, cy) = cell(x, y);
+            near.extend((cx - 1..=cx + 1).flat_map(|i| (cy - 1..=cy + 1).map(move |j| (i, j))));
+        }
+    }
+    for (&x, &y) in open.x.iter().zip(&open.y) {
+        if near.contains(&cell(x, y)) {
+            xy.push([x, y]);
+            owner.push(None);
+        }
     }
     let mut wait = vec![false; clusters.len()];
     for comp in geom::components(&xy, LINK_M) {

@@ -205,6 +205,8 @@ pub fn heading_deg(d: [f64; 2]) -> f64 {
 pub fn outlines(cloud: &PointCloud, candidates: &[Candidate], params: &Params) -> Vec<Piece> {
     let o = cloud.origin;
     let abs = |p: [f64; 2]| [p[0] + o[0], p[1] + o[1]];
+    let points_of =
+        |c: &Candidate| -> Vec<[f64; 2]> { c.indices.iter().map(|&i| [cloud.x[i], cloud.y[i]]).collect() };
     candidates
         .par_iter()
         .filter_map(|c| {
@@ -265,7 +267,7 @@ pub fn outlines(cloud: &PointCloud, candidates: &[Candidate], params: &Params) -
                 | MarkingClass::SolidLine
                     if s.width_m > params.max_bar_width_m =>
                 {
-                    let pts: Vec<[f64; 2]> = c.indices.iter().map(|&i| [cloud.x[i], cloud.y[i]]).collect();
+                    let pts = points_of(c);
                     (
                         irregular_ring(&pts, s, params),
                         s.length_m,
@@ -302,7 +304,7 @@ pub fn outlines(cloud: &PointCloud, candidates: &[Candidate], params: &Params) -
                     // intact diamond's alpha shape is already the rhombus (its hull would
                     // only add the mitred corners), and a hull holding over
                     // [`DIAMOND_MAX_HULL_RATIO`] times the paint is no rim of a diamond.
-                    let pts: Vec<[f64; 2]> = c.indices.iter().map(|&i| [cloud.x[i], cloud.y[i]]).collect();
+                    let pts = points_of(c);
                     let alpha = irregular_ring(&pts, s, params);
                     let hull = outline::convex_hull(&alpha);
                     let (a, h) = (outline::area(&alpha), outline::area(&hull));
@@ -311,7 +313,7 @@ pub fn outlines(cloud: &PointCloud, candidates: &[Candidate], params: &Params) -
                     (ring, s.length_m, s.width_m, heading_deg(along), None)
                 }
                 _ => {
-                    let pts: Vec<[f64; 2]> = c.indices.iter().map(|&i| [cloud.x[i], cloud.y[i]]).collect();
+                    let pts = points_of(c);
                     (
                         irregular_ring(&pts, s, params),
                         s.length_m,

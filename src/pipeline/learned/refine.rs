@@ -49,11 +49,10 @@
 //! evaluation per cluster (≈ 4 M multiply-adds); memory O(batch · n) per worker.
 
 use serde::{Deserialize, Serialize};
-use std::sync::Arc;
 
 use super::{Classifier, ClusterPoints};
 use crate::pipeline::PipelineError;
-use crate::pipeline::classify::Candidate;
+use crate::pipeline::classify::{Candidate, shared_unions};
 use crate::pipeline::types::{MarkingClass, PointCloud};
 
 /// When the learned classifier runs.
@@ -173,17 +172,16 @@ pub fn refine_with(
     // The short clusters the classify stage peeled lines off, each once, with the
     // candidates (pieces) peeled off it; then the groups of fragments that hold such a
     // cluster, likewise.
-    let wholes = shared_unions(candidates, |c| c.whole.as_ref());
-    let groups = shared_unions(candidates, |c| c.group.as_ref());
-    let n_wholes = wholes.len();
-    let wholes: Vec<(Arc<Candidate>, Vec<usize>)> = wholes.into_iter().chain(groups).collect();
-    if selected.is_empty() && wholes.is_empty() {
+    let mut unions = shared_unions(candidates, |c| c.whole.as_ref());
+    let n_wholes = unions.len();
+    unions.extend(shared_unions(candidates, |c| c.group.as_ref()));
+    if selected.is_empty() && unions.is_empty() {
         return Ok(RefineStats::default());
     }
     let views: Vec<ClusterPoints<'_>> = selected
         .iter()
         .map(|&i| &candidates[i])
-        .chain(wholes.iter().map(|(w, _)| w.as_ref()))
+        .chain(unions.iter().map(|(w, _)| w.as_ref()))
         .map(|c| ClusterPoints {
             cloud,
             indices: &c.indices,
@@ -192,12 +190,12 @@ pub fn refine_with(
         .collect();
     let preds = classifier.classify(&views)?;
     drop(views);
-    let (preds, whole_preds) = preds.split_at(selected.len());
+    let (preds, union_preds) = preds.split_at(selected.len());
     let threshold = classifier.info().unknown_threshold as f64;
     let overrule = params.dash_overrule_confidence.max(threshold);
     let glyph_min = params.glyph_min_confidence.max(threshold);
     let mut stats = RefineStats {
-        examined: selected.len() + wholes.len(),
+        examined: selected.len() + unions.len(),
         ..RefineStats::default()
     };
     for (&i, pred) in selected.iter().zip(preds) {
@@ -228,7 +226,7 @@ pub fn refine_with(
     // an arrow beside it is no stop line): a straight arrow beside a lone turning branch
     // is a straight-and-turn arrow.
     let mut chosen: Vec<usize> = Vec::new();
-    for (u, ((_, pieces), pred)) in wholes.iter().zip(whole_preds).enumerate() {
+    for (u, ((_, pieces), pred)) in unions.iter().zip(union_preds).enumerate() {
         if !painted_object(pred.class) || (pred.prob(pred.class) as f64) < overrule {
             continue;
         }
@@ -236,13 +234,13 @@ pub fn refine_with(
             if !glyph(pred.class) {
                 continue;
             }
-            chosen.retain(|&v| !wholes[v].1.iter().any(|i| pieces.contains(i)));
+            chosen.retain(|&v| !unions[v].1.iter().any(|i| pieces.contains(i)));
         }
         chosen.push(u);
     }
     let mut keep = vec![true; candidates.len()];
     for u in chosen {
-        let ((w, pieces), pred) = (&wholes[u], &whole_preds[u]);
+        let ((w, pieces), pred) = (&unions[u], &union_preds[u]);
         candidates[pieces[0]] = Candidate {
             class: pred.class,
             confidence: pred.prob(pred.class) as f64,
@@ -262,23 +260,6 @@ pub fn refine_with(
 /// only at `glyph_min_confidence` (see [`Params`]).
 fn glyph(class: MarkingClass) -> bool {
     class.is_arrow() || class == MarkingClass::Diamond
-}
-
-/// The distinct unions `of` the candidates point to (in order of first appearance), each
-/// with the candidates that point to it.
-fn shared_unions(
-    candidates: &[Candidate],
-    of: impl Fn(&Candidate) -> Option<&Arc<Candidate>>,
-) -> Vec<(Arc<Candidate>, Vec<usize>)> {
-    let mut out: Vec<(Arc<Candidate>, Vec<usize>)> = Vec::new();
-    for (i, c) in candidates.iter().enumerate() {
-        let Some(w) = of(c) else { continue };
-        match out.iter_mut().find(|(x, _)| Arc::ptr_eq(x, w)) {
-            Some((_, pieces)) => pieces.push(i),
-            None => out.push((Arc::clone(w), vec![i])),
-        }
-    }
-    out
 }
 
 /// A painted object other than a line or a crosswalk stripe: what the network may make of
