@@ -33,7 +33,9 @@
 //!    - *crossing bar*: on short clusters, a Hough search over directions finds the densest
 //!      straight bar (≤ `max_bar_width_m`); parts attached to it are split off when they are
 //!      parallel filled bars, or perpendicular objects lying on one side of the bar with the
-//!      bar overhanging both their ends (an arrow tip touching a stop line).
+//!      bar overhanging both their ends (an arrow tip touching a stop line), or filled bars
+//!      ≥ 2 m long meeting it square (≥ 75°) on one side (a lane line ending on a stop line:
+//!      an L of two bars is no one painted object; a turning branch leaves at 45–65°).
 //! 3. **Stacked scan rows** (`join_rows`): at far range the scanner samples the road in
 //!    rows dense along them and 0.3–0.6 m apart across, so a crosswalk stripe becomes a
 //!    stack of short parallel one-row fragments (one per row crossing it). Fragments that
@@ -660,6 +662,12 @@ fn bar_split(pts: &[[f64; 2]], p: &Params) -> Option<Vec<Vec<usize>>> {
     None
 }
 
+/// Shortest arm of an L of two filled bars that [`bar_split_at`] takes apart (m), and the
+/// least angle between the arms (deg): a lane line meets a stop line square, an arrow's
+/// turning branch leaves its shaft at 45–65°.
+const L_ARM_MIN_M: f64 = 2.0;
+const L_ARM_MIN_ANGLE_DEG: f64 = 75.0;
+
 /// One bar candidate of [`bar_split`]: direction `theta`, densest window starting at bin `w0`.
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
 fn bar_split_at(
@@ -768,8 +776,14 @@ fn bar_split_at(
         // A filled stripe touching the bar at an angle (chevrons on an edge line).
         let diagonal =
             phi > 20.0 && phi < 70.0 && one_side && shape.length() >= 1.0 && filled_bar(&pxy).is_some();
+        // A filled bar at least 2 m long meeting the bar square, on one side of it (a lane
+        // line ending on a stop line): an L of two such bars is no one painted object.
+        let l_arm = phi >= L_ARM_MIN_ANGLE_DEG
+            && one_side
+            && shape.length() >= L_ARM_MIN_M
+            && filled_bar(&pxy).is_some();
         // A long line takes nothing with it: whatever touches it is another object.
-        if long || parallel || perpendicular || diagonal {
+        if long || parallel || perpendicular || diagonal || l_arm {
             out.push(part);
         } else {
             bar.extend(part);
@@ -976,6 +990,16 @@ mod tests {
         // Stop line across, 0.4 m wide, 3.5 m long, touching the arrow tip.
         let mut pts = arrow.clone();
         pts.extend(rect(1.65, 0.3, 3.5, 0.4, 90.0, 0.03, 6));
+        let c = run(&cloud(&pts), &Params::default());
+        assert_eq!(c.len(), 2, "{:?}", sizes(&c));
+    }
+
+    #[test]
+    fn a_lane_line_ending_on_a_stop_line_is_split() {
+        // Stop line 0.45 × 4 m across (along y), a 0.15 m lane line 3.5 m long ending on
+        // it at one end (an L: the stop line's other half went with another cluster).
+        let mut pts = rect(0.0, 2.0, 4.0, 0.45, 90.0, 0.03, 7);
+        pts.extend(rect(-1.97, 0.1, 3.5, 0.15, 0.0, 0.03, 8));
         let c = run(&cloud(&pts), &Params::default());
         assert_eq!(c.len(), 2, "{:?}", sizes(&c));
     }
