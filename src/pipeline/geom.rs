@@ -394,6 +394,28 @@ pub fn interp_clamped(xs: &[f64], ys: &[f64], x: f64) -> f64 {
     }
 }
 
+/// Least-squares slope of the polyline y(x) (`xs` ascending) over `[lo, hi]`, sampled
+/// every metre (and at both ends) by [`interp_clamped`], so every stretch counts by its
+/// length whatever its vertex density. `None` when the span is shorter than 1 m.
+pub fn slope_in(xs: &[f64], ys: &[f64], lo: f64, hi: f64) -> Option<f64> {
+    if xs.is_empty() || (hi - lo).is_nan() || hi - lo < 1.0 {
+        return None;
+    }
+    let n = (hi - lo).ceil() as usize;
+    let pts: Vec<(f64, f64)> = (0..=n)
+        .map(|k| {
+            let x = lo + (hi - lo) * k as f64 / n as f64;
+            (x, interp_clamped(xs, ys, x))
+        })
+        .collect();
+    let m = pts.len() as f64;
+    let (mx, my) = pts.iter().fold((0.0, 0.0), |a, p| (a.0 + p.0 / m, a.1 + p.1 / m));
+    let (sxx, sxy) = pts.iter().fold((0.0, 0.0), |a, p| {
+        (a.0 + (p.0 - mx) * (p.0 - mx), a.1 + (p.0 - mx) * (p.1 - my))
+    });
+    Some(sxy / sxx)
+}
+
 /// Median nearest-neighbour distance of (a deterministic subsample of) the points; a proxy
 /// for the point spacing. `None` with fewer than 2 points or no neighbour within `max_r`.
 pub fn spacing(xy: &[[f64; 2]], max_r: f64) -> Option<f64> {
@@ -875,6 +897,20 @@ mod tests {
     }
 
     use super::*;
+
+    #[test]
+    fn slope_in_sees_through_a_wiggle() {
+        // y = 0.01 x with a 0.2 m bump between x = 40 and 45, sampled unevenly.
+        let xs = [0.0, 40.0, 42.5, 45.0, 100.0];
+        let ys = [0.0, 0.4, 0.625, 0.45, 1.0];
+        let k = slope_in(&xs, &ys, 0.0, 100.0).expect("span");
+        assert!((k - 0.01).abs() < 0.001, "{k}");
+        // Over [20, 42.5] the end values read 0.019 / m; the fit stays nearer the trend.
+        let k = slope_in(&xs, &ys, 20.0, 42.5).expect("span");
+        assert!(k < 0.015, "{k}");
+        assert!(slope_in(&xs, &ys, 3.0, 3.5).is_none());
+        assert!(slope_in(&[], &[], 0.0, 10.0).is_none());
+    }
 
     /// A zebra stripe across a side street, 3.4 m x 0.45 m, seen at far range: scan rows
     /// 0.4 m apart cross it, each sampling its whole width every 0.03 m. Sliced finer than

@@ -31,6 +31,9 @@
 //!    a gap's course, the gap may be up to `max_unseen_gap_m`, the offsets may match
 //!    without extrapolating the slopes, and short pieces' directions count with their
 //!    full uncertainty: a far line crossed by drifting scan columns, or hidden by traffic.
+//!    Stretches at least 20 m long also link across gaps up to `max_chain_gap_m` when
+//!    their ends meet within the tolerance of a `max_gap_m` gap and `max_angle_deg`: on a
+//!    long drive a far line's dashes can go unseen for a hundred metres.
 //! 3. **Dashed or solid**: pieces closer than `run_join_gap_m` form painted runs; runs up
 //!    to `dash_max_run_m` are dash-like. At least `min_dashes` consecutive dash-like runs
 //!    of regular length (≥ 60 % within ±35 % of the median) with paint ≤ 80 % of their span
@@ -88,6 +91,11 @@ pub struct Params {
     /// [`super::observed`]): a far line crossed by too few scan rows, a long occlusion.
     /// Default 60.
     pub max_unseen_gap_m: f64,
+    /// Largest gap bridged between two stretches of line each at least
+    /// [`CHAIN_MIN_SPAN_M`] long whose ends agree in offset and direction as closely as
+    /// across a `max_gap_m` gap (m): a far line whose dashes go unseen for a hundred metres
+    /// on a long drive is still one line. Default 150.
+    pub max_chain_gap_m: f64,
     /// Offset mismatch allowed at a gap (m), plus `lateral_tolerance_per_m` per metre of
     /// gap. Defaults 0.25 and 0.01: lane lines 3–3.75 m apart are never joined.
     pub lateral_tolerance_m: f64,
@@ -124,6 +132,7 @@ impl Default for Params {
         Self {
             max_gap_m: 40.0,
             max_unseen_gap_m: 60.0,
+            max_chain_gap_m: 150.0,
             lateral_tolerance_m: 0.25,
             lateral_tolerance_per_m: 0.01,
             max_angle_deg: 5.0,
@@ -146,6 +155,7 @@ impl Params {
         let checks = [
             ("max_gap_m", self.max_gap_m, 0.0, 500.0),
             ("max_unseen_gap_m", self.max_unseen_gap_m, 0.0, 500.0),
+            ("max_chain_gap_m", self.max_chain_gap_m, 0.0, 2000.0),
             ("lateral_tolerance_m", self.lateral_tolerance_m, 0.0, 5.0),
             ("lateral_tolerance_per_m", self.lateral_tolerance_per_m, 0.0, 1.0),
             ("max_angle_deg", self.max_angle_deg, 0.0, 45.0),
@@ -244,6 +254,9 @@ const BARE_PERIOD_JITTER: f64 = 0.25;
 /// A painted run longer than this many times the median run of its group is no dash.
 const NOT_A_DASH_FACTOR: f64 = 4.0;
 
+/// Shortest stretch (m, along the track) that links across gaps up to `max_chain_gap_m`.
+const CHAIN_MIN_SPAN_M: f64 = 20.0;
+
 /// Gaps (m) up to which the direction slack of short pieces applies in full; beyond, it
 /// shrinks in proportion.
 const SLACK_GAP_M: f64 = 3.0;
@@ -330,7 +343,7 @@ fn link(
         let from = order.partition_point(|&x| segs[x].s0 < sa.s1 - 0.5).max(oi + 1);
         for &b in &order[from..] {
             let sb = &segs[b];
-            if sb.s0 > sa.s1 + p.max_gap_m.max(p.max_unseen_gap_m) {
+            if sb.s0 > sa.s1 + p.max_gap_m.max(p.max_unseen_gap_m).max(p.max_chain_gap_m) {
                 break;
             }
             if b == a || sb.s1 <= sa.s1 {
@@ -354,7 +367,15 @@ fn link(
             let flat = (sa.o1 - sb.o0).abs();
             let unsure = 0.5 * g * (slope_noise(sa) / sa.span() + slope_noise(sb) / sb.span());
             let extrapolated = flat > tol && unsure > tol;
-            if dev > tol || turn > max_tan + slack || g > p.max_gap_m || extrapolated {
+            // Two long stretches across a longer gap: held to the offset tolerance of a
+            // `max_gap_m` gap and to `max_angle_deg` without slack.
+            let long_link = g > p.max_gap_m
+                && g <= p.max_chain_gap_m
+                && sa.s1 - sa.s0 >= CHAIN_MIN_SPAN_M
+                && sb.s1 - sb.s0 >= CHAIN_MIN_SPAN_M
+                && dev <= p.lateral_tolerance_m + p.lateral_tolerance_per_m * p.max_gap_m
+                && turn <= max_tan;
+            if dev > tol || turn > max_tan + slack || (g > p.max_gap_m && !long_link) || extrapolated {
                 // Across a gap the scanner did not see, the pieces on either side are all
                 // the evidence there is of the line: a short fragment's own slope (a 1 m
                 // far-range piece's is off by several degrees) is not extrapolated, and its
@@ -1157,6 +1178,42 @@ mod tests {
             width_m: 0.15,
             confidence: 0.9,
         }
+    }
+
+    /// Two 30 m stretches of one line 90 m apart (a far line whose dashes went unseen) are
+    /// linked; 0.8 m apart across the road they are not, nor are 10 m pieces, nor
+    /// stretches beyond `max_chain_gap_m`.
+    #[test]
+    fn long_stretches_link_across_long_gaps_short_pieces_do_not() {
+        let p = Params::default();
+        let none = |_: [f64; 2], _: [f64; 2]| false;
+        let pair = |len: f64, gap: f64, d: f64| {
+            [
+                seg(0.0, len, 5.0, 0.0, 0.15),
+                seg(len + gap, 2.0 * len + gap, 5.0 + d, 0.0, 0.15),
+            ]
+        };
+        assert_eq!(link(&pair(30.0, 90.0, 0.1), &p, &[], &none), vec![vec![0, 1]]);
+        assert_eq!(
+            link(&pair(30.0, 90.0, 0.8), &p, &[], &none),
+            vec![vec![0], vec![1]]
+        );
+        assert_eq!(
+            link(&pair(10.0, 90.0, 0.0), &p, &[], &none),
+            vec![vec![0], vec![1]]
+        );
+        assert_eq!(
+            link(&pair(30.0, 160.0, 0.0), &p, &[], &none),
+            vec![vec![0], vec![1]]
+        );
+        let off = Params {
+            max_chain_gap_m: 0.0,
+            ..Params::default()
+        };
+        assert_eq!(
+            link(&pair(30.0, 90.0, 0.0), &off, &[], &none),
+            vec![vec![0], vec![1]]
+        );
     }
 
     /// Offsets that only meet by extrapolating slopes: two 15 m pieces of a line drifting

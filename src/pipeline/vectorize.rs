@@ -789,7 +789,8 @@ fn dash_spans(l: &lanes::LaneResult, pieces: &[Piece]) -> Vec<dashes::Span> {
 /// over at least `FRAGMENT_LINE_MIN_LENGTH_M` becomes a lane line: its pieces' offsets
 /// smoothed over `FRAGMENT_LINE_SMOOTHING_M`, refitted without pieces off it by more than
 /// `FRAGMENT_TOLERANCE_M`, and dropped if it drifts across the road by more than
-/// `FRAGMENT_PARALLEL_M` relative to the lane line beside it. It is kept, dashed, only
+/// `FRAGMENT_PARALLEL_M` relative to the lane line beside it (whose drift is its
+/// least-squares slope over the overlap: a bridged gap may wiggle). It is kept, dashed, only
 /// where its pieces fall on one phase of
 /// a lane-line dash design of the drive's other dashed lines (dashes at most
 /// `FRAGMENT_DESIGN_MAX_WIDTH_M` wide, the design of the most lane-line length tried
@@ -943,7 +944,11 @@ fn fragment_lines(
             .filter_map(|(ms, os)| {
                 let (lo, hi) = (ms.first()?.max(c0), ms.last()?.min(c1));
                 let at = |st: f64| geom::interp_clamped(ms, os, st);
-                (hi - lo >= 0.5 * (c1 - c0)).then(|| (lo, hi, at(0.5 * (lo + hi)), at(hi) - at(lo)))
+                // The neighbour's drift from its least-squares slope over the overlap, not
+                // from its two end values: where it bridges a gap it may wiggle by a
+                // decimetre or two.
+                let drift = geom::slope_in(ms, os, lo, hi).map_or(at(hi) - at(lo), |k| k * (hi - lo));
+                (hi - lo >= 0.5 * (c1 - c0)).then(|| (lo, hi, at(0.5 * (lo + hi)), drift))
             })
             .min_by(|x, y| (x.2 - o_mid).abs().total_cmp(&(y.2 - o_mid).abs()));
         if let Some((lo, hi, _, drift)) = beside {
