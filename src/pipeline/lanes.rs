@@ -33,7 +33,9 @@
 //!    full uncertainty: a far line crossed by drifting scan columns, or hidden by traffic.
 //!    Stretches at least 20 m long also link across gaps up to `max_chain_gap_m` when
 //!    their ends meet within the tolerance of a `max_gap_m` gap and `max_angle_deg`: on a
-//!    long drive a far line's dashes can go unseen for a hundred metres.
+//!    long drive a far line's dashes can go unseen for a hundred metres. Two solid
+//!    stretches (painted over 70 % of their length) never link so across bare asphalt seen
+//!    on the gap's course: the line breaks there (a ramp's mouth, a lane drop).
 //! 3. **Dashed or solid**: pieces closer than `run_join_gap_m` form painted runs; runs up
 //!    to `dash_max_run_m` are dash-like. At least `min_dashes` consecutive dash-like runs
 //!    of regular length (≥ 60 % within ±35 % of the median) with paint ≤ 80 % of their span
@@ -234,6 +236,8 @@ struct Seg {
     slope0: f64,
     slope1: f64,
     width: f64,
+    /// Along-track length its members cover (m; overlaps counted twice).
+    painted: f64,
 }
 
 /// Lateral uncertainty (m) of a piece's end over the length its slope is fitted on: the
@@ -256,6 +260,10 @@ const NOT_A_DASH_FACTOR: f64 = 4.0;
 
 /// Shortest stretch (m, along the track) that links across gaps up to `max_chain_gap_m`.
 const CHAIN_MIN_SPAN_M: f64 = 20.0;
+
+/// Share of its span a stretch's pieces cover above which it is a solid line for the
+/// long links (dashed lines paint 25–40 %).
+const SOLID_SHARE: f64 = 0.7;
 
 /// Gaps (m) up to which the direction slack of short pieces applies in full; beyond, it
 /// shrinks in proportion.
@@ -320,6 +328,10 @@ fn seg_of(items: &[Item], members: Vec<usize>) -> Seg {
         slope0: end_slope(&so, false, 15.0),
         slope1: end_slope(&so, true, 15.0),
         width: w,
+        painted: members
+            .iter()
+            .map(|&m| items[m].so[items[m].so.len() - 1][0] - items[m].so[0][0])
+            .sum(),
         members,
     }
 }
@@ -330,6 +342,7 @@ fn link(
     p: &Params,
     barriers: &[[f64; 4]],
     unseen: &dyn Fn([f64; 2], [f64; 2]) -> bool,
+    bare: &dyn Fn([f64; 2], [f64; 2]) -> bool,
 ) -> Vec<Vec<usize>> {
     let n = segs.len();
     let mut order: Vec<usize> = (0..n).collect();
@@ -374,7 +387,12 @@ fn link(
                 && sa.s1 - sa.s0 >= CHAIN_MIN_SPAN_M
                 && sb.s1 - sb.s0 >= CHAIN_MIN_SPAN_M
                 && dev <= p.lateral_tolerance_m + p.lateral_tolerance_per_m * p.max_gap_m
-                && turn <= max_tan;
+                && turn <= max_tan
+                // Two well-painted (solid) stretches do not link across bare asphalt seen
+                // on the gap's course: the line breaks there (a ramp's mouth, a lane drop).
+                && !(sa.painted >= SOLID_SHARE * (sa.s1 - sa.s0)
+                    && sb.painted >= SOLID_SHARE * (sb.s1 - sb.s0)
+                    && bare([sa.s1, sa.o1], [sb.s0, sb.o0]));
             if dev > tol || turn > max_tan + slack || (g > p.max_gap_m && !long_link) || extrapolated {
                 // Across a gap the scanner did not see, the pieces on either side are all
                 // the evidence there is of the line: a short fragment's own slope (a 1 m
@@ -494,6 +512,7 @@ pub fn grow_with_barriers(
         seen.gap(&course, COURSE_HALF_WIDTH_M)
     };
     let unseen = |a: [f64; 2], b: [f64; 2]| gap_at(a, b) == Gap::Unseen;
+    let bare = |a: [f64; 2], b: [f64; 2]| gap_at(a, b) == Gap::SeenBare;
     // Barrier boxes in the trajectory frame (s0, s1, o0, o1), widened by 0.5 m across so
     // the gaps between zebra stripes count too.
     let boxes: Vec<[f64; 4]> = barriers
@@ -531,12 +550,12 @@ pub fn grow_with_barriers(
     let items = merge_overlaps(items);
     // Round 1: pieces; round 2: chains.
     let segs: Vec<Seg> = (0..items.len()).map(|i| seg_of(&items, vec![i])).collect();
-    let chains1: Vec<Vec<usize>> = link(&segs, p, &boxes, &unseen)
+    let chains1: Vec<Vec<usize>> = link(&segs, p, &boxes, &unseen, &bare)
         .into_iter()
         .map(|c| c.into_iter().flat_map(|s| segs[s].members.clone()).collect())
         .collect();
     let segs2: Vec<Seg> = chains1.into_iter().map(|m| seg_of(&items, m)).collect();
-    let chains: Vec<Vec<usize>> = link(&segs2, p, &boxes, &unseen)
+    let chains: Vec<Vec<usize>> = link(&segs2, p, &boxes, &unseen, &bare)
         .into_iter()
         .map(|c| c.into_iter().flat_map(|s| segs2[s].members.clone()).collect())
         .collect();
@@ -1158,6 +1177,7 @@ mod tests {
             slope0: slope,
             slope1: slope,
             width,
+            painted: s1 - s0,
         }
     }
 
@@ -1193,17 +1213,20 @@ mod tests {
                 seg(len + gap, 2.0 * len + gap, 5.0 + d, 0.0, 0.15),
             ]
         };
-        assert_eq!(link(&pair(30.0, 90.0, 0.1), &p, &[], &none), vec![vec![0, 1]]);
         assert_eq!(
-            link(&pair(30.0, 90.0, 0.8), &p, &[], &none),
+            link(&pair(30.0, 90.0, 0.1), &p, &[], &none, &none),
+            vec![vec![0, 1]]
+        );
+        assert_eq!(
+            link(&pair(30.0, 90.0, 0.8), &p, &[], &none, &none),
             vec![vec![0], vec![1]]
         );
         assert_eq!(
-            link(&pair(10.0, 90.0, 0.0), &p, &[], &none),
+            link(&pair(10.0, 90.0, 0.0), &p, &[], &none, &none),
             vec![vec![0], vec![1]]
         );
         assert_eq!(
-            link(&pair(30.0, 160.0, 0.0), &p, &[], &none),
+            link(&pair(30.0, 160.0, 0.0), &p, &[], &none, &none),
             vec![vec![0], vec![1]]
         );
         let off = Params {
@@ -1211,7 +1234,7 @@ mod tests {
             ..Params::default()
         };
         assert_eq!(
-            link(&pair(30.0, 90.0, 0.0), &off, &[], &none),
+            link(&pair(30.0, 90.0, 0.0), &off, &[], &none, &none),
             vec![vec![0], vec![1]]
         );
     }
@@ -1229,14 +1252,14 @@ mod tests {
             seg(0.0, 15.0, 5.36 - 15.0 * k, k, 0.15),
             seg(52.0, 67.0, 7.11, k, 0.15),
         ];
-        assert_eq!(link(&long, &p, &[], &none), vec![vec![0, 1]]);
+        assert_eq!(link(&long, &p, &[], &none, &none), vec![vec![0, 1]]);
         let blob = [
             seg(0.0, 2.0, 5.36 - 2.0 * k, k, 0.47),
             seg(39.0, 41.8, 7.11, k, 0.25),
         ];
-        assert_eq!(link(&blob, &p, &[], &none), vec![vec![0], vec![1]]);
+        assert_eq!(link(&blob, &p, &[], &none, &none), vec![vec![0], vec![1]]);
         let level = [seg(0.0, 2.0, 5.36, 0.0, 0.47), seg(39.0, 41.8, 5.4, 0.0, 0.25)];
-        assert_eq!(link(&level, &p, &[], &none), vec![vec![0, 1]]);
+        assert_eq!(link(&level, &p, &[], &none, &none), vec![vec![0, 1]]);
     }
 
     /// Mutual best matches repeat among the ends left free: C is the best next piece of
@@ -1254,7 +1277,7 @@ mod tests {
             level(14.0, 30.0, 3.5),
             level(20.0, 30.0, 3.8),
         ];
-        let mut chains = link(&segs, &p, &[], &none);
+        let mut chains = link(&segs, &p, &[], &none, &none);
         chains.sort();
         assert_eq!(chains, vec![vec![0, 3], vec![1, 2]]);
         // A far line's pieces, 26 m from the trajectory, across gaps the scanner did not
@@ -1270,7 +1293,7 @@ mod tests {
             far(230.7, 231.9, 26.40, 0.0603, 0.09),
         ];
         let unseen = |_: [f64; 2], _: [f64; 2]| true;
-        assert_eq!(link(&segs, &p, &[], &unseen), vec![vec![0, 1, 2]]);
+        assert_eq!(link(&segs, &p, &[], &unseen, &none), vec![vec![0, 1, 2]]);
     }
 
     /// Two 1 m solid fragments 30 m apart cover 6 % of the line they would span: no lane
@@ -1567,6 +1590,35 @@ mod tests {
         let lanes = grow(&fragments, &t, &p);
         assert_eq!(lanes.lines.len(), 1);
         assert_eq!(lanes.lines[0].class, LaneLineClass::SolidLine);
+    }
+
+    /// Two solid stretches 25 m long, 80 m apart on one course: one lane line where the
+    /// scanner did not see the gap or cannot tell, two where it saw bare asphalt there (a
+    /// ramp's mouth). Dashed stretches link across bare gaps: their gaps are bare anyway.
+    #[test]
+    fn solid_stretches_do_not_link_across_seen_bare_asphalt() {
+        let t = test_straight_trajectory(200, -20.0);
+        let p = Params::default();
+        let solid = [
+            piece(0, 0.0, 25.0, MarkingClass::SolidLine),
+            piece(1, 105.0, 130.0, MarkingClass::SolidLine),
+        ];
+        let unseen = test_seen_except(&t, 3.5, |x| (25.0..105.0).contains(&x));
+        let bare = test_seen_except(&t, 3.5, |_| false);
+        let lines = |pieces: &[LanePiece], seen: &crate::pipeline::observed::Observed| {
+            grow_with_barriers(pieces, &t, &p, &[], Some(&seen.lookup()))
+                .lines
+                .len()
+        };
+        assert_eq!(grow(&solid, &t, &p).lines.len(), 1);
+        assert_eq!(lines(&solid, &unseen), 1);
+        assert_eq!(lines(&solid, &bare), 2);
+        let dashes: Vec<LanePiece> = [0.0, 9.0, 18.0, 105.0, 114.0, 123.0]
+            .iter()
+            .enumerate()
+            .map(|(i, &a)| piece(i, a, a + 3.0, MarkingClass::DashedLine))
+            .collect();
+        assert_eq!(lines(&dashes, &bare), 1);
     }
 
     /// Two solid pieces 45 m apart (more than `max_gap_m`): one lane line when the scanner
