@@ -273,7 +273,12 @@ fn frame(pts: &[[f64; 2]], pca: &Pca) -> Vec<[f64; 2]> {
 /// Is this part a filled bar (a dash, a stripe), and along which axis?
 fn filled_bar(pts: &[[f64; 2]]) -> Option<BarShape> {
     let s = BarShape::of(pts);
-    (s.length() >= 2.5 * s.width() && s.fill >= 0.7).then_some(s)
+    is_filled_bar(&s).then_some(s)
+}
+
+/// Is this shape a filled bar (see [`filled_bar`])?
+fn is_filled_bar(s: &BarShape) -> bool {
+    s.length() >= 2.5 * s.width() && s.fill >= 0.7
 }
 
 /// Split `rest` (indices into `pts`) into components; parts with fewer than
@@ -753,12 +758,11 @@ fn bar_split_at(
     for part in parts {
         let pxy: Vec<[f64; 2]> = part.iter().map(|&k| pts[k]).collect();
         let shape = BarShape::of(&pxy);
+        let filled = is_filled_bar(&shape);
         let phi = geom::acute_angle_deg(shape.pca.axis, geom::canonical(dir));
         let band_w = nhi - nlo;
-        let parallel = phi <= 12.0
-            && filled_bar(&pxy).is_some()
-            && shape.length() >= 1.0
-            && shape.width() >= (0.3 * band_w).max(0.06);
+        let parallel =
+            phi <= 12.0 && filled && shape.length() >= 1.0 && shape.width() >= (0.3 * band_w).max(0.06);
         let (mut pa, mut pb) = (f64::INFINITY, f64::NEG_INFINITY);
         let mut same_side = 0usize;
         let side = (normal(&rel[part[0]]) - ncen).signum();
@@ -774,14 +778,10 @@ fn bar_split_at(
         let perpendicular =
             phi >= 60.0 && pa - ba >= 0.3 && bb - pb >= 0.3 && (bb - ba) >= 2.5 * (pb - pa) && one_side;
         // A filled stripe touching the bar at an angle (chevrons on an edge line).
-        let diagonal =
-            phi > 20.0 && phi < 70.0 && one_side && shape.length() >= 1.0 && filled_bar(&pxy).is_some();
+        let diagonal = phi > 20.0 && phi < 70.0 && one_side && shape.length() >= 1.0 && filled;
         // A filled bar at least 2 m long meeting the bar square, on one side of it (a lane
         // line ending on a stop line): an L of two such bars is no one painted object.
-        let l_arm = phi >= L_ARM_MIN_ANGLE_DEG
-            && one_side
-            && shape.length() >= L_ARM_MIN_M
-            && filled_bar(&pxy).is_some();
+        let l_arm = phi >= L_ARM_MIN_ANGLE_DEG && one_side && shape.length() >= L_ARM_MIN_M && filled;
         // A long line takes nothing with it: whatever touches it is another object.
         if long || parallel || perpendicular || diagonal || l_arm {
             out.push(part);

@@ -394,6 +394,23 @@ pub fn interp_clamped(xs: &[f64], ys: &[f64], x: f64) -> f64 {
     }
 }
 
+/// Least-squares slope dy/dx of the points; `None` with fewer than 2 points or no spread
+/// in x (Σ(x − x̄)² < 1e-9).
+pub fn ls_slope(pts: &[[f64; 2]]) -> Option<f64> {
+    let n = pts.len() as f64;
+    if n < 2.0 {
+        return None;
+    }
+    let mx = pts.iter().map(|q| q[0]).sum::<f64>() / n;
+    let my = pts.iter().map(|q| q[1]).sum::<f64>() / n;
+    let (mut sxx, mut sxy) = (0.0, 0.0);
+    for q in pts {
+        sxx += (q[0] - mx) * (q[0] - mx);
+        sxy += (q[0] - mx) * (q[1] - my);
+    }
+    (sxx >= 1e-9).then(|| sxy / sxx)
+}
+
 /// Least-squares slope of the polyline y(x) (`xs` ascending) over `[lo, hi]`, sampled
 /// every metre (and at both ends) by [`interp_clamped`], so every stretch counts by its
 /// length whatever its vertex density. `None` when the span is shorter than 1 m.
@@ -402,18 +419,13 @@ pub fn slope_in(xs: &[f64], ys: &[f64], lo: f64, hi: f64) -> Option<f64> {
         return None;
     }
     let n = (hi - lo).ceil() as usize;
-    let pts: Vec<(f64, f64)> = (0..=n)
+    let pts: Vec<[f64; 2]> = (0..=n)
         .map(|k| {
             let x = lo + (hi - lo) * k as f64 / n as f64;
-            (x, interp_clamped(xs, ys, x))
+            [x, interp_clamped(xs, ys, x)]
         })
         .collect();
-    let m = pts.len() as f64;
-    let (mx, my) = pts.iter().fold((0.0, 0.0), |a, p| (a.0 + p.0 / m, a.1 + p.1 / m));
-    let (sxx, sxy) = pts.iter().fold((0.0, 0.0), |a, p| {
-        (a.0 + (p.0 - mx) * (p.0 - mx), a.1 + (p.0 - mx) * (p.1 - my))
-    });
-    Some(sxy / sxx)
+    ls_slope(&pts)
 }
 
 /// Median nearest-neighbour distance of (a deterministic subsample of) the points; a proxy

@@ -295,22 +295,7 @@ fn end_slope(so: &[[f64; 2]], at_end: bool, span: f64) -> f64 {
         let lim = so[0][0] + span;
         so.iter().copied().filter(|q| q[0] <= lim).collect()
     };
-    let n = pick.len() as f64;
-    if n < 2.0 {
-        return 0.0;
-    }
-    let ms = pick.iter().map(|q| q[0]).sum::<f64>() / n;
-    let mo = pick.iter().map(|q| q[1]).sum::<f64>() / n;
-    let (mut sxx, mut sxy) = (0.0, 0.0);
-    for q in &pick {
-        sxx += (q[0] - ms) * (q[0] - ms);
-        sxy += (q[0] - ms) * (q[1] - mo);
-    }
-    if sxx < 1e-9 {
-        0.0
-    } else {
-        (sxy / sxx).clamp(-0.5, 0.5)
-    }
+    geom::ls_slope(&pick).map_or(0.0, |k| k.clamp(-0.5, 0.5))
 }
 
 fn seg_of(items: &[Item], members: Vec<usize>) -> Seg {
@@ -341,8 +326,7 @@ fn link(
     segs: &[Seg],
     p: &Params,
     barriers: &[[f64; 4]],
-    unseen: &dyn Fn([f64; 2], [f64; 2]) -> bool,
-    bare: &dyn Fn([f64; 2], [f64; 2]) -> bool,
+    gap_at: &dyn Fn([f64; 2], [f64; 2]) -> Gap,
 ) -> Vec<Vec<usize>> {
     let n = segs.len();
     let mut order: Vec<usize> = (0..n).collect();
@@ -380,6 +364,9 @@ fn link(
             let flat = (sa.o1 - sb.o0).abs();
             let unsure = 0.5 * g * (slope_noise(sa) / sa.span() + slope_noise(sb) / sb.span());
             let extrapolated = flat > tol && unsure > tol;
+            // What the scanner saw on the gap's course, looked up once and only if asked.
+            let seen = std::cell::OnceCell::new();
+            let gap = || *seen.get_or_init(|| gap_at([sa.s1, sa.o1], [sb.s0, sb.o0]));
             // Two long stretches across a longer gap: held to the offset tolerance of a
             // `max_gap_m` gap and to `max_angle_deg` without slack.
             let long_link = g > p.max_gap_m
@@ -392,7 +379,7 @@ fn link(
                 // on the gap's course: the line breaks there (a ramp's mouth, a lane drop).
                 && !(sa.painted >= SOLID_SHARE * (sa.s1 - sa.s0)
                     && sb.painted >= SOLID_SHARE * (sb.s1 - sb.s0)
-                    && bare([sa.s1, sa.o1], [sb.s0, sb.o0]));
+                    && gap() == Gap::SeenBare);
             if dev > tol || turn > max_tan + slack || (g > p.max_gap_m && !long_link) || extrapolated {
                 // Across a gap the scanner did not see, the pieces on either side are all
                 // the evidence there is of the line: a short fragment's own slope (a 1 m
@@ -402,7 +389,7 @@ fn link(
                 if g > p.max_unseen_gap_m
                     || dev.min(flat) > tol
                     || turn > max_tan + full_slack
-                    || !unseen([sa.s1, sa.o1], [sb.s0, sb.o0])
+                    || gap() != Gap::Unseen
                 {
                     continue;
                 }
@@ -511,8 +498,6 @@ pub fn grow_with_barriers(
             .collect();
         seen.gap(&course, COURSE_HALF_WIDTH_M)
     };
-    let unseen = |a: [f64; 2], b: [f64; 2]| gap_at(a, b) == Gap::Unseen;
-    let bare = |a: [f64; 2], b: [f64; 2]| gap_at(a, b) == Gap::SeenBare;
     // Barrier boxes in the trajectory frame (s0, s1, o0, o1), widened by 0.5 m across so
     // the gaps between zebra stripes count too.
     let boxes: Vec<[f64; 4]> = barriers
@@ -550,12 +535,12 @@ pub fn grow_with_barriers(
     let items = merge_overlaps(items);
     // Round 1: pieces; round 2: chains.
     let segs: Vec<Seg> = (0..items.len()).map(|i| seg_of(&items, vec![i])).collect();
-    let chains1: Vec<Vec<usize>> = link(&segs, p, &boxes, &unseen, &bare)
+    let chains1: Vec<Vec<usize>> = link(&segs, p, &boxes, &gap_at)
         .into_iter()
         .map(|c| c.into_iter().flat_map(|s| segs[s].members.clone()).collect())
         .collect();
     let segs2: Vec<Seg> = chains1.into_iter().map(|m| seg_of(&items, m)).collect();
-    let chains: Vec<Vec<usize>> = link(&segs2, p, &boxes, &unseen, &bare)
+    let chains: Vec<Vec<usize>> = link(&segs2, p, &boxes, &gap_at)
         .into_iter()
         .map(|c| c.into_iter().flat_map(|s| segs2[s].members.clone()).collect())
         .collect();
@@ -1206,27 +1191,24 @@ mod tests {
     #[test]
     fn long_stretches_link_across_long_gaps_short_pieces_do_not() {
         let p = Params::default();
-        let none = |_: [f64; 2], _: [f64; 2]| false;
+        let none = |_: [f64; 2], _: [f64; 2]| Gap::Unknown;
         let pair = |len: f64, gap: f64, d: f64| {
             [
                 seg(0.0, len, 5.0, 0.0, 0.15),
                 seg(len + gap, 2.0 * len + gap, 5.0 + d, 0.0, 0.15),
             ]
         };
+        assert_eq!(link(&pair(30.0, 90.0, 0.1), &p, &[], &none), vec![vec![0, 1]]);
         assert_eq!(
-            link(&pair(30.0, 90.0, 0.1), &p, &[], &none, &none),
-            vec![vec![0, 1]]
-        );
-        assert_eq!(
-            link(&pair(30.0, 90.0, 0.8), &p, &[], &none, &none),
+            link(&pair(30.0, 90.0, 0.8), &p, &[], &none),
             vec![vec![0], vec![1]]
         );
         assert_eq!(
-            link(&pair(10.0, 90.0, 0.0), &p, &[], &none, &none),
+            link(&pair(10.0, 90.0, 0.0), &p, &[], &none),
             vec![vec![0], vec![1]]
         );
         assert_eq!(
-            link(&pair(30.0, 160.0, 0.0), &p, &[], &none, &none),
+            link(&pair(30.0, 160.0, 0.0), &p, &[], &none),
             vec![vec![0], vec![1]]
         );
         let off = Params {
@@ -1234,7 +1216,7 @@ mod tests {
             ..Params::default()
         };
         assert_eq!(
-            link(&pair(30.0, 90.0, 0.0), &off, &[], &none, &none),
+            link(&pair(30.0, 90.0, 0.0), &off, &[], &none),
             vec![vec![0], vec![1]]
         );
     }
@@ -1246,20 +1228,20 @@ mod tests {
     #[test]
     fn short_wide_blobs_do_not_steer_links_sideways() {
         let p = Params::default();
-        let none = |_: [f64; 2], _: [f64; 2]| false;
+        let none = |_: [f64; 2], _: [f64; 2]| Gap::Unknown;
         let k = 0.047;
         let long = [
             seg(0.0, 15.0, 5.36 - 15.0 * k, k, 0.15),
             seg(52.0, 67.0, 7.11, k, 0.15),
         ];
-        assert_eq!(link(&long, &p, &[], &none, &none), vec![vec![0, 1]]);
+        assert_eq!(link(&long, &p, &[], &none), vec![vec![0, 1]]);
         let blob = [
             seg(0.0, 2.0, 5.36 - 2.0 * k, k, 0.47),
             seg(39.0, 41.8, 7.11, k, 0.25),
         ];
-        assert_eq!(link(&blob, &p, &[], &none, &none), vec![vec![0], vec![1]]);
+        assert_eq!(link(&blob, &p, &[], &none), vec![vec![0], vec![1]]);
         let level = [seg(0.0, 2.0, 5.36, 0.0, 0.47), seg(39.0, 41.8, 5.4, 0.0, 0.25)];
-        assert_eq!(link(&level, &p, &[], &none, &none), vec![vec![0, 1]]);
+        assert_eq!(link(&level, &p, &[], &none), vec![vec![0, 1]]);
     }
 
     /// Mutual best matches repeat among the ends left free: C is the best next piece of
@@ -1270,14 +1252,14 @@ mod tests {
     fn ends_left_free_link_to_their_next_best_match() {
         let level = |s0: f64, s1: f64, o: f64| seg(s0, s1, o, 0.0, 0.15);
         let p = Params::default();
-        let none = |_: [f64; 2], _: [f64; 2]| false;
+        let none = |_: [f64; 2], _: [f64; 2]| Gap::Unknown;
         let segs = [
             level(0.0, 10.0, 3.6),
             level(5.0, 13.5, 3.52),
             level(14.0, 30.0, 3.5),
             level(20.0, 30.0, 3.8),
         ];
-        let mut chains = link(&segs, &p, &[], &none, &none);
+        let mut chains = link(&segs, &p, &[], &none);
         chains.sort();
         assert_eq!(chains, vec![vec![0, 3], vec![1, 2]]);
         // A far line's pieces, 26 m from the trajectory, across gaps the scanner did not
@@ -1292,8 +1274,8 @@ mod tests {
             far(210.4, 214.6, 26.43, 0.0103, 0.18),
             far(230.7, 231.9, 26.40, 0.0603, 0.09),
         ];
-        let unseen = |_: [f64; 2], _: [f64; 2]| true;
-        assert_eq!(link(&segs, &p, &[], &unseen, &none), vec![vec![0, 1, 2]]);
+        let unseen = |_: [f64; 2], _: [f64; 2]| Gap::Unseen;
+        assert_eq!(link(&segs, &p, &[], &unseen), vec![vec![0, 1, 2]]);
     }
 
     /// Two 1 m solid fragments 30 m apart cover 6 % of the line they would span: no lane

@@ -943,15 +943,17 @@ fn fragment_lines(
             .iter()
             .filter_map(|(ms, os)| {
                 let (lo, hi) = (ms.first()?.max(c0), ms.last()?.min(c1));
-                let at = |st: f64| geom::interp_clamped(ms, os, st);
-                // The neighbour's drift from its least-squares slope over the overlap, not
-                // from its two end values: where it bridges a gap it may wiggle by a
-                // decimetre or two.
-                let drift = geom::slope_in(ms, os, lo, hi).map_or(at(hi) - at(lo), |k| k * (hi - lo));
-                (hi - lo >= 0.5 * (c1 - c0)).then(|| (lo, hi, at(0.5 * (lo + hi)), drift))
+                (hi - lo >= 0.5 * (c1 - c0))
+                    .then(|| (lo, hi, geom::interp_clamped(ms, os, 0.5 * (lo + hi)), ms, os))
             })
             .min_by(|x, y| (x.2 - o_mid).abs().total_cmp(&(y.2 - o_mid).abs()));
-        if let Some((lo, hi, _, drift)) = beside {
+        if let Some((lo, hi, _, ms, os)) = beside {
+            // The neighbour's drift from its least-squares slope over the overlap, not from
+            // its two end values: where it bridges a gap it may wiggle by a decimetre or two.
+            let drift = geom::slope_in(ms, os, lo, hi).map_or_else(
+                || geom::interp_clamped(ms, os, hi) - geom::interp_clamped(ms, os, lo),
+                |k| k * (hi - lo),
+            );
             let own = fit(&xs, &ys, &ws, hi) - fit(&xs, &ys, &ws, lo);
             if (own - drift).abs() > FRAGMENT_PARALLEL_M {
                 continue;
