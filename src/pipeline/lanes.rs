@@ -187,7 +187,9 @@ impl Params {
 pub struct LanePiece {
     /// Caller's key (returned in [`LaneResult::pieces`]).
     pub key: usize,
-    /// `SolidLine` or `DashedLine` (others are ignored).
+    /// `SolidLine` or `DashedLine`, or `Unknown` for a line fragment too short to tell
+    /// (joined like the others, but not counted as a dash or as solid paint); other
+    /// classes are ignored.
     pub class: MarkingClass,
     /// Centreline, at least 2 vertices.
     pub centerline: Vec<[f64; 2]>,
@@ -224,6 +226,9 @@ struct Item {
     so: Vec<[f64; 2]>,
     width: f64,
     conf: f64,
+    /// An `unknown` line fragment: part of the chain, but no evidence of dashes or solid
+    /// paint (see [`regimes`]).
+    neutral: bool,
 }
 
 /// A linkable segment: one piece or a chain of pieces.
@@ -518,7 +523,10 @@ pub fn grow_with_barriers(
     let mut items: Vec<Item> = pieces
         .iter()
         .filter(|q| {
-            matches!(q.class, MarkingClass::SolidLine | MarkingClass::DashedLine) && q.centerline.len() >= 2
+            matches!(
+                q.class,
+                MarkingClass::SolidLine | MarkingClass::DashedLine | MarkingClass::Unknown
+            ) && q.centerline.len() >= 2
         })
         .filter_map(|q| {
             let mut so: Vec<[f64; 2]> = q.centerline.iter().map(|&v| refl.locate(v)).collect();
@@ -528,6 +536,7 @@ pub fn grow_with_barriers(
                 so,
                 width: q.width_m.max(0.01),
                 conf: q.confidence,
+                neutral: q.class == MarkingClass::Unknown,
             })
         })
         .collect();
@@ -550,11 +559,9 @@ pub fn grow_with_barriers(
         chain.sort_by(|&a, &b| items[a].so[0][0].total_cmp(&items[b].so[0][0]).then(a.cmp(&b)));
         for (class, members) in regimes(&items, &chain, p, seen.map(|_| &gap_at as &dyn Fn(_, _) -> Gap)) {
             let s0 = items[members[0]].so[0][0];
-            let s1 = members
-                .iter()
-                .map(|&m| items[m].so[items[m].so.len() - 1][0])
-                .fold(f64::NEG_INFINITY, f64::max);
-            if s1 - s0 < p.min_length_m || (members.len() == 1 && class != LaneLineClass::SolidLine) {
+            let s1 = end_of(&items, &members);
+            let named = members.iter().filter(|&&m| !items[m].neutral).count();
+            if s1 - s0 < p.min_length_m || (named == 1 && class != LaneLineClass::SolidLine) {
                 continue;
             }
             let painted: f64 = members
@@ -618,6 +625,7 @@ fn merge_parallel_chains(items: &[Item], chains: Vec<Vec<usize>>) -> Vec<Vec<usi
                 so,
                 width: c.iter().map(|&m| items[m].width).fold(0.0, f64::max),
                 conf: 0.0,
+                neutral: c.iter().all(|&m| items[m].neutral),
             }
         })
         .collect();
@@ -763,6 +771,7 @@ fn merge_overlaps(items: Vec<Item>) -> Vec<Item> {
                 m.keys.extend(it.keys);
                 m.width = m.width.max(it.width);
                 m.conf = m.conf.max(it.conf);
+                m.neutral &= it.neutral;
             }
         }
     }
@@ -831,8 +840,45 @@ fn true_spans(v: &[bool]) -> Vec<(usize, usize)> {
     out
 }
 
-/// Split a chain (pieces in driving order) into solid and dashed stretches.
+/// Largest end mileage of the members.
+fn end_of(items: &[Item], members: &[usize]) -> f64 {
+    members
+        .iter()
+        .map(|&m| items[m].so[items[m].so.len() - 1][0])
+        .fold(f64::NEG_INFINITY, f64::max)
+}
+
+/// Split a chain (pieces in driving order) into solid and dashed stretches, judged on its
+/// named pieces; each neutral piece (an `unknown` fragment: a far line's dash seen in part
+/// looks like a dash on a solid line too) joins the stretch nearest to it. A chain of
+/// neutral pieces alone has none.
 fn regimes(
+    items: &[Item],
+    chain: &[usize],
+    p: &Params,
+    gap_at: Option<&dyn Fn([f64; 2], [f64; 2]) -> Gap>,
+) -> Vec<(LaneLineClass, Vec<usize>)> {
+    let (neutral, named): (Vec<usize>, Vec<usize>) = chain.iter().partition(|&&m| items[m].neutral);
+    if named.is_empty() {
+        return Vec::new();
+    }
+    let mut regs = named_regimes(items, &named, p, gap_at);
+    let start = |m: usize| items[m].so[0][0];
+    for m in neutral {
+        let (a, b) = (start(m), items[m].so[items[m].so.len() - 1][0]);
+        let away = |ms: &[usize]| (start(ms[0]) - b).max(a - end_of(items, ms)).max(0.0);
+        if let Some(r) = regs.iter_mut().min_by(|x, y| away(&x.1).total_cmp(&away(&y.1))) {
+            r.1.push(m);
+        }
+    }
+    for r in &mut regs {
+        r.1.sort_by(|&x, &y| start(x).total_cmp(&start(y)).then(x.cmp(&y)));
+    }
+    regs
+}
+
+/// [`regimes`] of a chain of named pieces.
+fn named_regimes(
     items: &[Item],
     chain: &[usize],
     p: &Params,
@@ -1185,6 +1231,34 @@ mod tests {
         }
     }
 
+    /// `unknown` fragments (1 m every 6 m, the period of a dashed line) between two stretches
+    /// of a solid line join it without making it dashed there: one solid lane line, the
+    /// fragments made `solid_line`. Named dashes so placed make a dashed stretch, and
+    /// fragments alone make no lane line.
+    #[test]
+    fn neutral_fragments_join_a_line_without_deciding_its_class() {
+        let p = Params::default();
+        let pieces = |middle: MarkingClass| {
+            let mut v = vec![piece(0, 0.0, 30.0, MarkingClass::SolidLine)];
+            v.extend((0..8).map(|k| piece(1 + k, 33.0 + 6.0 * k as f64, 34.0 + 6.0 * k as f64, middle)));
+            v.push(piece(9, 82.0, 110.0, MarkingClass::SolidLine));
+            v
+        };
+        let lanes = grow(&pieces(MarkingClass::Unknown), &traj(), &p);
+        assert_eq!(lanes.lines.len(), 1, "{:?}", lanes.lines);
+        assert_eq!(lanes.lines[0].class, LaneLineClass::SolidLine);
+        assert_eq!(lanes.lines[0].pieces.len(), 10);
+        assert!(lanes.classes.iter().all(|&(_, c)| c == MarkingClass::SolidLine));
+        let dashed = grow(&pieces(MarkingClass::DashedLine), &traj(), &p);
+        assert!(
+            dashed.lines.iter().any(|l| l.class == LaneLineClass::DashedLine),
+            "{:?}",
+            dashed.lines
+        );
+        let alone: Vec<LanePiece> = pieces(MarkingClass::Unknown)[1..9].to_vec();
+        assert!(grow(&alone, &traj(), &p).lines.is_empty());
+    }
+
     /// Two 30 m stretches of one line 90 m apart (a far line whose dashes went unseen) are
     /// linked; 0.8 m apart across the road they are not, nor are 10 m pieces, nor
     /// stretches beyond `max_chain_gap_m`.
@@ -1358,6 +1432,7 @@ mod tests {
             so,
             width,
             conf: 0.9,
+            neutral: false,
         };
         let ramp = |k: f64| {
             item(
@@ -1401,6 +1476,7 @@ mod tests {
                 .collect(),
             width: 0.12,
             conf: 0.8,
+            neutral: false,
         };
         let outer = || frags(0, &[(0.0, 2.0), (18.0, 22.0)], 16.4);
         assert_eq!(
@@ -1430,6 +1506,7 @@ mod tests {
                 .collect(),
             width,
             conf: 0.8,
+            neutral: false,
         };
         let lower = || line(0, 0.0, 10.0, 5.4, 0.15);
         let upper = || line(1, 0.0, 10.0, 5.7, 0.15);

@@ -294,12 +294,14 @@ impl Trajectory {
         let side = d[0] * ry - d[1] * rx; // cross product: positive on the left
         let dist = (x - px).hypot(y - py);
         // Beyond the ends of the track, extrapolate mileage along the end segments.
-        let mileage = if (i == 0 && along < 0.0) || (i + 2 == self.poses.len() && along > seg) {
+        let beyond_end = (i == 0 && along < 0.0) || (i + 2 == self.poses.len() && along > seg);
+        let mileage = if beyond_end {
             self.cum_m[i] + along
         } else {
             self.cum_m[i] + cl
         };
-        let offset = if cl == along {
+        // Beyond an end the station frame goes on straight: the offset is the lateral part.
+        let offset = if cl == along || beyond_end {
             side
         } else {
             dist.copysign(if side == 0.0 { 1.0 } else { side })
@@ -532,12 +534,10 @@ impl<'a> StationIndex<'a> {
         let (_, i, along, cl, side, ex, ey) = best;
         let len = self.seg_len[i];
         let cum = self.traj.cum_m[i];
-        let mileage = if (i == 0 && along < 0.0) || (i + 1 == n && along > len) {
-            cum + along
-        } else {
-            cum + cl
-        };
-        let offset = if cl == along {
+        let beyond_end = (i == 0 && along < 0.0) || (i + 1 == n && along > len);
+        let mileage = if beyond_end { cum + along } else { cum + cl };
+        // As in `Trajectory::project_on`: beyond an end the offset is the lateral part.
+        let offset = if cl == along || beyond_end {
             side
         } else {
             ex.hypot(ey).copysign(if side == 0.0 { 1.0 } else { side })
@@ -817,6 +817,27 @@ mod tests {
             (s.mileage_m + 3.0).abs() < 1e-12,
             "mileage extrapolates before the start"
         );
+        // Beyond either end the frame goes on straight: the offset is the lateral part
+        // (not the distance to the end pose), so a line behind the start keeps its offset.
+        let s = t.locate(-8.0, 1.5);
+        assert!(
+            (s.mileage_m + 8.0).abs() < 1e-12 && (s.offset_m - 1.5).abs() < 1e-12,
+            "{s:?}"
+        );
+        let s = t.locate(11.5, 16.0);
+        assert!(
+            (s.mileage_m - 26.0).abs() < 1e-12 && (s.offset_m + 1.5).abs() < 1e-12,
+            "{s:?}"
+        );
+        let s = t.locate_in(-8.0, 1.5, Some((0, 1)));
+        assert!((s.offset_m - 1.5).abs() < 1e-12, "{s:?}");
+        // The index the pipeline locates its points with agrees.
+        let idx = StationIndex::new(&t, 1.0);
+        for q in [[-8.0, 1.5], [11.5, 16.0]] {
+            let mut hint = usize::MAX;
+            assert_eq!(idx.locate_near(q[0], q[1], &mut hint), t.locate(q[0], q[1]));
+            assert_eq!(idx.locate(q[0], q[1]), t.locate(q[0], q[1]));
+        }
         let (p, _) = t.at_mileage(12.0);
         assert!((p[0] - 10.0).abs() < 1e-12 && (p[1] - 2.0).abs() < 1e-12);
     }

@@ -314,12 +314,22 @@ pub fn outlines(cloud: &PointCloud, candidates: &[Candidate], params: &Params) -
                 }
                 _ => {
                     let pts = points_of(c);
+                    // An `unknown` piece that passed the line test as narrow as a painted
+                    // line (a far line's dash seen in part, shorter than a dash) keeps its
+                    // centreline: lane growth may join it (see `assemble`).
+                    let centerline = c
+                        .line
+                        .as_ref()
+                        .filter(|l| {
+                            c.class == MarkingClass::Unknown && l.paint_width_m <= LINE_FRAGMENT_MAX_WIDTH_M
+                        })
+                        .map(|l| l.centerline.iter().map(|&p| abs(p)).collect());
                     (
                         irregular_ring(&pts, s, params),
                         s.length_m,
                         s.width_m,
                         heading_deg(along),
-                        None,
+                        centerline,
                     )
                 }
             };
@@ -399,6 +409,10 @@ fn row_rect(cloud: &PointCloud, indices: &[usize], s: &Shape) -> Shape {
     r.width_m = v.1 - v.0;
     r
 }
+
+/// Widest painted line (m) an `unknown` line fragment may be for lane growth: lane lines
+/// are 0.10–0.30 m wide (GB 5768, MUTCD wide lines).
+const LINE_FRAGMENT_MAX_WIDTH_M: f64 = 0.3;
 
 /// A line piece narrower than this many point spacings is not resolved across.
 const UNRESOLVED_POINTS_ACROSS: f64 = 2.0;
@@ -1537,6 +1551,9 @@ pub fn assemble(
         .enumerate()
         .filter_map(|(k, p)| {
             let cl = p.centerline.as_ref()?;
+            // A short `unknown` line fragment is joined like the others (as a neutral
+            // piece, see `lanes::LanePiece::class`): joined to a lane line it takes the
+            // line's class, alone it stays `unknown`.
             Some(LanePiece {
                 key: k,
                 class: p.marking.class,
@@ -1957,6 +1974,29 @@ mod tests {
         let near = |p: [f64; 2], q: [f64; 2]| (p[0] - q[0]).hypot(p[1] - q[1]) < 1e-9;
         assert!(near(cl[0], [14.0, 26.5]) && near(cl[1], [19.0, 26.5]), "{cl:?}");
         assert!((pieces[1].marking.heading_deg - 90.0).abs() < 1e-9);
+    }
+
+    /// An `unknown` line fragment (1.5 m, shorter than any dash) between two 18 m pieces
+    /// of a line 42 m apart joins them into one lane line and takes its class; without
+    /// it the gap is too long and they stay two lines.
+    #[test]
+    fn unknown_line_fragments_join_lane_lines() {
+        let traj = crate::pipeline::types::test_straight_trajectory(100, -20.0);
+        let mut fragment = shifted(solid(38.0, 39.5), 3.5);
+        fragment.marking.class = MarkingClass::Unknown;
+        let ends = vec![shifted(solid(0.0, 18.0), 3.5), shifted(solid(60.0, 78.0), 3.5)];
+        let (_, lines) = assemble(ends.clone(), &traj, &Params::default(), None);
+        assert_eq!(lines.len(), 2);
+        let mut with = ends;
+        with.push(fragment.clone());
+        let (marks, lines) = assemble(with, &traj, &Params::default(), None);
+        assert_eq!(lines.len(), 1, "{lines:?}");
+        assert!((lines[0].length_m - 78.0).abs() < 1.0, "{}", lines[0].length_m);
+        assert!(marks.iter().all(|m| m.class == MarkingClass::SolidLine));
+        // Alone it stays `unknown`.
+        let (marks, lines) = assemble(vec![fragment], &traj, &Params::default(), None);
+        assert!(lines.is_empty());
+        assert_eq!(marks[0].class, MarkingClass::Unknown);
     }
 
     /// Six 2/4 m dashes make a dashed lane line and stay dashes; a lone dash 3.5 m beside
