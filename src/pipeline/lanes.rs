@@ -36,7 +36,11 @@
 //!    long drive a far line's dashes can go unseen for a hundred metres. Two solid
 //!    stretches (painted over 70 % of their length) never link so across bare asphalt seen
 //!    on the gap's course: the line breaks there (a ramp's mouth, a lane drop).
-//! 3. **Dashed or solid**: pieces closer than `run_join_gap_m` form painted runs; runs up
+//! 3. **Dashed or solid**, judged on the named pieces only: `unknown` line fragments
+//!    (neutral pieces: a far line's dash seen in part, shorter than any dash, looks the
+//!    same on a solid line) are linked like the others but join the stretch nearest to
+//!    them afterwards, and a chain of them alone is no lane line. Pieces closer than
+//!    `run_join_gap_m` form painted runs; runs up
 //!    to `dash_max_run_m` are dash-like. At least `min_dashes` consecutive dash-like runs
 //!    of regular length (≥ 60 % within ±35 % of the median) with paint ≤ 80 % of their span
 //!    form a dashed stretch, and so do dash-like runs whose centres repeat with one period
@@ -62,7 +66,7 @@
 //!    the line follows the road's curvature through occlusions. Sampled every `vertex_spacing_m`, mapped back through
 //!    the reference frame and simplified (Douglas–Peucker, `simplify_tolerance_m`).
 //! 5. Lane lines shorter than `min_length_m` or whose pieces cover less than
-//!    `min_paint_share` of their length, and single pieces that are not solid, are
+//!    `min_paint_share` of their length, and single named pieces that are not solid, are
 //!    dropped: isolated dashes or noise do not make lane lines.
 //!
 //! Confidence: the mean piece confidence × support (pieces and painted length) × fit

@@ -3,7 +3,9 @@
 //! # Interface
 //! - `outlines(&PointCloud, &[Candidate], &Params) -> Vec<Piece>`: one [`Piece`] per
 //!   candidate: a [`Marking`] in ABSOLUTE coordinates (origin added; `id` still empty) and,
-//!   for pieces along the road, the absolute centreline. Per chunk (the candidates already
+//!   for pieces along the road, the absolute centreline (also for `unknown` pieces that
+//!   passed the line test no wider than a painted line, for lane growth to join as neutral
+//!   pieces). Per chunk (the candidates already
 //!   carry their trajectory frame).
 //! - `assemble(Vec<Piece>, &Trajectory(absolute), &Params) -> (Vec<Marking>, Vec<LaneLine>)`:
 //!   lane-line growth over all pieces (run it once per drive, so lane lines are continuous
