@@ -51,7 +51,8 @@
 //!    - everything else → `unknown` (arrows, diamonds, text: the learned classifier's job).
 //!    Kept `unknown` pieces up to 6 m long within 0.5 m of each other (a worn or sparsely
 //!    scanned arrow or diamond in pieces) share their union as `Candidate::whole`, for the
-//!    learned classifier to put back together (`group_fragments`).
+//!    learned classifier to put back together (`group_fragments`); pieces of a line that
+//!    runs on in line for more than 12 m (a lane line beside the object) are left out.
 //!    Lane-line context (a "dash" inside a solid lane line is an occluded solid piece) is
 //!    applied later by `vectorize`. Clusters dropped as too small that are still pieces of a
 //!    line along the road ([`is_line_fragment`]: a far lane's dash seen as one scan row's
@@ -645,7 +646,63 @@ pub fn drop_thin_strokes(candidates: &mut Vec<Candidate>, p: &Params) -> usize {
 /// cluster: to each of its pieces) as its `group`, offered when the peeled cluster alone is
 /// no painted object (an arrow whose turning branch broke off its shaft at a worn spot is
 /// a peeled shaft-and-head cluster and a branch beside it). Dashes alone never form a
-/// group: a dashed line is no object.
+/// group: a dashed line is no object; nor is a piece of a line longer than any painted
+/// object offered ([`in_long_lines`]: a lane line passing a far arrow's head).
+/// Line pieces that are part of a line longer than any painted object: kept line pieces
+/// chained end to end (the next one starting within [`CONTINUATION_GAP_M`] beyond the end
+/// of the last, at the same offset ± [`CONTINUATION_OFFSET_M`]) over more than
+/// [`MAX_OBJECT_LENGTH_M`] along the track. Such a piece belongs to a lane line (a sparse
+/// solid line comes in 1–5 m pieces), not to an object beside it: grouped with a far arrow
+/// that the line passes within half a metre of, it made the union no object. An arrow's
+/// shaft broken in two is a chain of a few metres; a dashed line's dashes are farther apart.
+/// Hand-written: O(k²) over the k line pieces of a chunk.
+fn in_long_lines(items: &[(Candidate, Option<DropReason>)]) -> Vec<bool> {
+    let ends: Vec<Option<([f64; 2], [f64; 2])>> = items
+        .iter()
+        .map(|(c, d)| {
+            let l = c.line.as_ref().filter(|l| l.stations.len() >= 2)?;
+            (d.is_none() && matches!(c.class, MarkingClass::SolidLine | MarkingClass::DashedLine))
+                .then(|| (l.stations[0], l.stations[l.stations.len() - 1]))
+        })
+        .collect();
+    let mut parent: Vec<usize> = (0..items.len()).collect();
+    for (a, ea) in ends.iter().enumerate() {
+        let Some((_, a1)) = *ea else { continue };
+        for (b, eb) in ends.iter().enumerate() {
+            let Some((b0, _)) = *eb else { continue };
+            let gap = b0[0] - a1[0];
+            if a != b
+                && (-2.0..=CONTINUATION_GAP_M).contains(&gap)
+                && (b0[1] - a1[1]).abs() <= CONTINUATION_OFFSET_M
+            {
+                geom::union(&mut parent, a, b);
+            }
+        }
+    }
+    let mut span: std::collections::HashMap<usize, (f64, f64)> = Default::default();
+    for (k, e) in ends.iter().enumerate() {
+        if let Some((e0, e1)) = *e {
+            let r = geom::find_root(&mut parent, k);
+            let v = span.entry(r).or_insert((e0[0], e1[0]));
+            *v = (v.0.min(e0[0]), v.1.max(e1[0]));
+        }
+    }
+    (0..items.len())
+        .map(|k| {
+            ends[k].is_some() && {
+                let (lo, hi) = span[&geom::find_root(&mut parent, k)];
+                hi - lo > MAX_OBJECT_LENGTH_M
+            }
+        })
+        .collect()
+}
+
+/// Largest gap (m, along the track) at which a line piece continues another (see
+/// [`in_long_lines`]).
+const CONTINUATION_GAP_M: f64 = 6.0;
+/// Largest offset difference (m) at which a line piece continues another.
+const CONTINUATION_OFFSET_M: f64 = 0.2;
+
 fn group_fragments(
     items: &mut [(Candidate, Option<DropReason>)],
     xy: &[[f64; 2]],
@@ -659,6 +716,7 @@ fn group_fragments(
             .into_iter()
             .map(|(w, members)| (Some(w), members))
             .collect();
+    let long_line = in_long_lines(items);
     for (k, (c, d)) in items.iter().enumerate() {
         let offered = match d {
             None => matches!(c.class, MarkingClass::Unknown | MarkingClass::DashedLine),
@@ -667,7 +725,7 @@ fn group_fragments(
                 c.shape.point_count >= FRAGMENT_MIN_DROPPED_POINTS
             }
         };
-        if c.whole.is_none() && offered && c.shape.length_m <= FRAGMENT_MAX_LENGTH_M {
+        if c.whole.is_none() && offered && c.shape.length_m <= FRAGMENT_MAX_LENGTH_M && !long_line[k] {
             units.push((None, vec![k]));
         }
     }
@@ -1493,6 +1551,41 @@ mod tests {
         ));
         assert_eq!(shaft.indices.len(), groups[0].len() + groups[1].len());
         assert!(items[2..].iter().all(|(c, _)| c.whole.is_none()));
+    }
+
+    /// The same sparse arrow with a lane line passing 0.35 m from its head, the line in
+    /// 2–4 m pieces 1 m apart over 12.5 m: the line's pieces are no part of the arrow's
+    /// group (their union with it would be no object), the shaft and head still are. A
+    /// shaft broken in two (two pieces in line over 4 m) is no lane line.
+    #[test]
+    fn pieces_of_a_long_line_are_not_grouped_with_an_arrow_beside_it() {
+        let mut xy: Vec<[f64; 2]> = Vec::new();
+        // Shaft and head, then the line's pieces.
+        let mut groups = vec![
+            block(&mut xy, 10.0, 12.0, 1.0, 1.15),
+            block(&mut xy, 12.3, 12.9, 0.8, 1.4),
+        ];
+        for (x0, x1) in [(6.0, 10.5), (11.5, 13.5), (14.5, 18.5)] {
+            groups.push(block(&mut xy, x0, x1, 1.75, 1.9));
+        }
+        let intensity = vec![100.0f32; xy.len()];
+        let (r, p) = (refl(), Params::default());
+        let mut items = kept(&xy, &intensity, &groups, &r, &p);
+        for k in [0, 2, 3, 4] {
+            items[k].0.class = MarkingClass::DashedLine;
+            assert!(items[k].0.line.is_some(), "piece {k} is a line piece");
+        }
+        items[1].1 = Some(DropReason::Blob);
+        assert_eq!(in_long_lines(&items), [false, false, true, true, true]);
+        group_fragments(&mut items, &xy, &intensity, &r, &p);
+        let shaft = items[0].0.whole.as_ref().expect("shaft grouped");
+        assert_eq!(shaft.indices.len(), groups[0].len() + groups[1].len());
+        assert!(items[2..].iter().all(|(c, _)| c.whole.is_none()));
+        // Two pieces in line over 4 m: too short for a lane line.
+        let mut two = kept(&xy, &intensity, &[groups[3].clone(), groups[4].clone()], &r, &p);
+        two.iter_mut()
+            .for_each(|(c, _)| c.class = MarkingClass::DashedLine);
+        assert_eq!(in_long_lines(&two), [false, false]);
     }
 
     /// A hatched area: four lines 2 m apart (more than the first three rounds peel) with
