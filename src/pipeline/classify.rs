@@ -655,42 +655,49 @@ pub fn drop_thin_strokes(candidates: &mut Vec<Candidate>, p: &Params) -> usize {
 /// solid line comes in 1–5 m pieces), not to an object beside it: grouped with a far arrow
 /// that the line passes within half a metre of, it made the union no object. An arrow's
 /// shaft broken in two is a chain of a few metres; a dashed line's dashes are farther apart.
-/// Hand-written: O(k²) over the k line pieces of a chunk.
-fn in_long_lines(items: &[(Candidate, Option<DropReason>)]) -> Vec<bool> {
-    let ends: Vec<Option<([f64; 2], [f64; 2])>> = items
+/// Hand-written (a union-find over the pieces in mileage order, like `rejoin`'s window):
+/// O(k log k + links) for the k line pieces of a chunk.
+fn in_long_lines(items: &[(Candidate, Option<DropReason>)], p: &Params) -> Vec<bool> {
+    // Kept line pieces' ends in the trajectory frame, in order of their start.
+    let ends: Vec<Option<End>> = items
         .iter()
         .map(|(c, d)| {
-            let l = c.line.as_ref().filter(|l| l.stations.len() >= 2)?;
-            (d.is_none() && matches!(c.class, MarkingClass::SolidLine | MarkingClass::DashedLine))
-                .then(|| (l.stations[0], l.stations[l.stations.len() - 1]))
+            let line = d.is_none()
+                && c.line.is_some()
+                && matches!(c.class, MarkingClass::SolidLine | MarkingClass::DashedLine);
+            line.then(|| piece_end(c, p)).flatten()
         })
         .collect();
+    let mut order: Vec<usize> = (0..items.len()).filter(|&k| ends[k].is_some()).collect();
+    order.sort_by(|&a, &b| {
+        let (ea, eb) = (ends[a].as_ref().expect("end"), ends[b].as_ref().expect("end"));
+        ea.s0.total_cmp(&eb.s0).then(a.cmp(&b))
+    });
     let mut parent: Vec<usize> = (0..items.len()).collect();
-    for (a, ea) in ends.iter().enumerate() {
-        let Some((_, a1)) = *ea else { continue };
-        for (b, eb) in ends.iter().enumerate() {
-            let Some((b0, _)) = *eb else { continue };
-            let gap = b0[0] - a1[0];
-            if a != b
-                && (-2.0..=CONTINUATION_GAP_M).contains(&gap)
-                && (b0[1] - a1[1]).abs() <= CONTINUATION_OFFSET_M
-            {
+    for &a in &order {
+        let ea = ends[a].as_ref().expect("end");
+        // Successors start from 2 m before a's end to CONTINUATION_GAP_M after it.
+        let from = order.partition_point(|&b| ends[b].as_ref().expect("end").s0 < ea.s1 - 2.0);
+        for &b in &order[from..] {
+            let eb = ends[b].as_ref().expect("end");
+            if eb.s0 > ea.s1 + CONTINUATION_GAP_M {
+                break;
+            }
+            if a != b && (eb.o0 - ea.o1).abs() <= CONTINUATION_OFFSET_M {
                 geom::union(&mut parent, a, b);
             }
         }
     }
-    let mut span: std::collections::HashMap<usize, (f64, f64)> = Default::default();
-    for (k, e) in ends.iter().enumerate() {
-        if let Some((e0, e1)) = *e {
-            let r = geom::find_root(&mut parent, k);
-            let v = span.entry(r).or_insert((e0[0], e1[0]));
-            *v = (v.0.min(e0[0]), v.1.max(e1[0]));
-        }
+    // Extent along the track of each chain (at its root).
+    let mut span = vec![(f64::INFINITY, f64::NEG_INFINITY); items.len()];
+    for &k in &order {
+        let (e, r) = (ends[k].as_ref().expect("end"), geom::find_root(&mut parent, k));
+        span[r] = (span[r].0.min(e.s0), span[r].1.max(e.s1));
     }
     (0..items.len())
         .map(|k| {
             ends[k].is_some() && {
-                let (lo, hi) = span[&geom::find_root(&mut parent, k)];
+                let (lo, hi) = span[geom::find_root(&mut parent, k)];
                 hi - lo > MAX_OBJECT_LENGTH_M
             }
         })
@@ -716,7 +723,7 @@ fn group_fragments(
             .into_iter()
             .map(|(w, members)| (Some(w), members))
             .collect();
-    let long_line = in_long_lines(items);
+    let long_line = in_long_lines(items, p);
     for (k, (c, d)) in items.iter().enumerate() {
         let offered = match d {
             None => matches!(c.class, MarkingClass::Unknown | MarkingClass::DashedLine),
@@ -1576,7 +1583,7 @@ mod tests {
             assert!(items[k].0.line.is_some(), "piece {k} is a line piece");
         }
         items[1].1 = Some(DropReason::Blob);
-        assert_eq!(in_long_lines(&items), [false, false, true, true, true]);
+        assert_eq!(in_long_lines(&items, &p), [false, false, true, true, true]);
         group_fragments(&mut items, &xy, &intensity, &r, &p);
         let shaft = items[0].0.whole.as_ref().expect("shaft grouped");
         assert_eq!(shaft.indices.len(), groups[0].len() + groups[1].len());
@@ -1585,7 +1592,7 @@ mod tests {
         let mut two = kept(&xy, &intensity, &[groups[3].clone(), groups[4].clone()], &r, &p);
         two.iter_mut()
             .for_each(|(c, _)| c.class = MarkingClass::DashedLine);
-        assert_eq!(in_long_lines(&two), [false, false]);
+        assert_eq!(in_long_lines(&two, &p), [false, false]);
     }
 
     /// A hatched area: four lines 2 m apart (more than the first three rounds peel) with

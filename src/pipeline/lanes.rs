@@ -235,6 +235,13 @@ struct Item {
     neutral: bool,
 }
 
+impl Item {
+    /// First and last mileage of its samples.
+    fn ends(&self) -> (f64, f64) {
+        (self.so[0][0], self.so[self.so.len() - 1][0])
+    }
+}
+
 /// A linkable segment: one piece or a chain of pieces.
 struct Seg {
     members: Vec<usize>,
@@ -848,7 +855,7 @@ fn true_spans(v: &[bool]) -> Vec<(usize, usize)> {
 fn end_of(items: &[Item], members: &[usize]) -> f64 {
     members
         .iter()
-        .map(|&m| items[m].so[items[m].so.len() - 1][0])
+        .map(|&m| items[m].ends().1)
         .fold(f64::NEG_INFINITY, f64::max)
 }
 
@@ -867,16 +874,20 @@ fn regimes(
         return Vec::new();
     }
     let mut regs = named_regimes(items, &named, p, gap_at);
-    let start = |m: usize| items[m].so[0][0];
+    // The named stretches' extents; a neutral piece joins the one it lies nearest to.
+    let spans: Vec<(f64, f64)> = regs
+        .iter()
+        .map(|r| (items[r.1[0]].ends().0, end_of(items, &r.1)))
+        .collect();
     for m in neutral {
-        let (a, b) = (start(m), items[m].so[items[m].so.len() - 1][0]);
-        let away = |ms: &[usize]| (start(ms[0]) - b).max(a - end_of(items, ms)).max(0.0);
-        if let Some(r) = regs.iter_mut().min_by(|x, y| away(&x.1).total_cmp(&away(&y.1))) {
-            r.1.push(m);
+        let (a, b) = items[m].ends();
+        let away = |k: usize| (spans[k].0 - b).max(a - spans[k].1).max(0.0);
+        if let Some(k) = (0..regs.len()).min_by(|&x, &y| away(x).total_cmp(&away(y))) {
+            regs[k].1.push(m);
         }
     }
     for r in &mut regs {
-        r.1.sort_by(|&x, &y| start(x).total_cmp(&start(y)).then(x.cmp(&y)));
+        r.1.sort_by(|&x, &y| items[x].ends().0.total_cmp(&items[y].ends().0).then(x.cmp(&y)));
     }
     regs
 }
@@ -891,7 +902,7 @@ fn named_regimes(
     // Painted runs: pieces closer than run_join_gap_m.
     let mut runs: Vec<(f64, f64, Vec<usize>)> = Vec::new();
     for &m in chain {
-        let (a, b) = (items[m].so[0][0], items[m].so[items[m].so.len() - 1][0]);
+        let (a, b) = items[m].ends();
         match runs.last_mut() {
             Some(r) if a - r.1 < p.run_join_gap_m => {
                 r.1 = r.1.max(b);
@@ -1009,14 +1020,7 @@ fn named_regimes(
             LaneLineClass::SolidLine
         }
     };
-    let extent = |ms: &[usize]| {
-        let a = items[ms[0]].so[0][0];
-        let b = ms
-            .iter()
-            .map(|&m| items[m].so[items[m].so.len() - 1][0])
-            .fold(f64::NEG_INFINITY, f64::max);
-        b - a
-    };
+    let extent = |ms: &[usize]| end_of(items, ms) - items[ms[0]].ends().0;
     if regs.len() == 1 {
         let (d, ms) = regs.pop().expect("one regime");
         return vec![(class_of(d), ms)];

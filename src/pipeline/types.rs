@@ -292,21 +292,13 @@ impl Trajectory {
         let cl = along.clamp(0.0, seg);
         let (px, py) = (a.x + cl * d[0], a.y + cl * d[1]);
         let side = d[0] * ry - d[1] * rx; // cross product: positive on the left
-        let dist = (x - px).hypot(y - py);
-        // Beyond the ends of the track, extrapolate mileage along the end segments.
-        let beyond_end = (i == 0 && along < 0.0) || (i + 2 == self.poses.len() && along > seg);
-        let mileage = if beyond_end {
-            self.cum_m[i] + along
-        } else {
-            self.cum_m[i] + cl
-        };
-        // Beyond an end the station frame goes on straight: the offset is the lateral part.
-        let offset = if cl == along || beyond_end {
-            side
-        } else {
-            dist.copysign(if side == 0.0 { 1.0 } else { side })
-        };
-        (mileage, offset, dist)
+        let (mileage, offset) = station_on_segment(
+            self.cum_m[i],
+            (along, cl, side),
+            [x - px, y - py],
+            (i == 0, i + 2 == self.poses.len()),
+        );
+        (mileage, offset, (x - px).hypot(y - py))
     }
 
     /// Nearest station to (x, y), searching segments `hint_lo..=hint_hi` (all when `None`).
@@ -532,22 +524,42 @@ impl<'a> StationIndex<'a> {
             }
         }
         let (_, i, along, cl, side, ex, ey) = best;
-        let len = self.seg_len[i];
-        let cum = self.traj.cum_m[i];
-        let beyond_end = (i == 0 && along < 0.0) || (i + 1 == n && along > len);
-        let mileage = if beyond_end { cum + along } else { cum + cl };
-        // As in `Trajectory::project_on`: beyond an end the offset is the lateral part.
-        let offset = if cl == along || beyond_end {
-            side
-        } else {
-            ex.hypot(ey).copysign(if side == 0.0 { 1.0 } else { side })
-        };
+        let (mileage, offset) = station_on_segment(
+            self.traj.cum_m[i],
+            (along, cl, side),
+            [ex, ey],
+            (i == 0, i + 1 == n),
+        );
         Station {
             mileage_m: mileage,
             offset_m: offset,
             direction: self.dir[i],
             segment: i,
         }
+    }
+}
+
+/// (mileage, offset) of a point projected on a segment starting at mileage `cum`: `along`
+/// its parameter along the segment, `cl` that parameter clamped to the segment, `side` its
+/// signed lateral distance from the segment's line (positive on the left), `e` the vector
+/// from the clamped foot to the point, `(first, last)` whether the segment is the track's
+/// first or last. Beyond either end of the track the frame goes on straight: mileage
+/// extrapolates along the end segment and the offset is the lateral part. Past an inner
+/// vertex the offset is the distance to that vertex, signed by the side.
+fn station_on_segment(
+    cum: f64,
+    (along, cl, side): (f64, f64, f64),
+    e: [f64; 2],
+    (first, last): (bool, bool),
+) -> (f64, f64) {
+    let beyond_end = (first && along < cl) || (last && along > cl);
+    if cl == along || beyond_end {
+        (cum + along, side)
+    } else {
+        (
+            cum + cl,
+            e[0].hypot(e[1]).copysign(if side == 0.0 { 1.0 } else { side }),
+        )
     }
 }
 
