@@ -277,6 +277,7 @@ fn candidate(
         line: None,
         whole: None,
         group: None,
+        alternatives: Vec::new(),
     }
 }
 
@@ -457,9 +458,9 @@ fn drive_along_x() -> Trajectory {
     Trajectory::new(poses).unwrap()
 }
 
-#[test]
-fn a_long_arrow_the_rules_peeled_apart_is_put_back_together() {
-    // GB 5768 highway straight arrow (9 m) in a lane beside a straight drive along +x.
+/// A GB 5768 straight arrow of the length `len` picks, pointing along +x from x = 10, filled
+/// densely ([`fill_marking`]); its point indices.
+fn straight_arrow_from_x10(len: impl Fn(&Standard) -> f64) -> (PointCloud, Vec<usize>) {
     let mut cloud = PointCloud::with_origin([500_000.0, 4_000_000.0, 10.0]);
     let st = Standard::parse("gb").unwrap();
     let frame = Frame2 {
@@ -469,8 +470,15 @@ fn a_long_arrow_the_rules_peeled_apart_is_put_back_together() {
     };
     let arrow = fill_marking(
         &mut cloud,
-        &markings::arrow(ArrowKind::Straight, &frame, st.arrow_len_highway),
+        &markings::arrow(ArrowKind::Straight, &frame, len(&st)),
     );
+    (cloud, arrow)
+}
+
+#[test]
+fn a_long_arrow_the_rules_peeled_apart_is_put_back_together() {
+    // GB 5768 highway straight arrow (9 m) in a lane beside a straight drive along +x.
+    let (cloud, arrow) = straight_arrow_from_x10(|st| st.arrow_len_highway);
     let traj = drive_along_x();
     let clusters = cluster::run(&cloud, &cluster::Params::default());
     assert_eq!(clusters.len(), 1);
@@ -681,4 +689,56 @@ fn an_arrow_whose_branch_wore_off_the_shaft_is_put_back_together() {
     assert_eq!(cands[0].class, MarkingClass::StraightRightArrow, "{classes:?}");
     assert_eq!(cands[0].indices.len(), cloud.len());
     assert!(cands[0].confidence >= 0.8);
+}
+
+/// A straight arrow in two pieces (shaft, head) with a lane line's 5 m piece passing 0.35 m
+/// from its head. The classify stage's group of the three is no sure painted object with
+/// the line in it (p ≈ 0.58); offered without the line piece as well
+/// (`Candidate::alternatives`, p ≈ 0.95), the arrow's two pieces are put back together as
+/// the arrow and the line piece stays.
+#[test]
+fn an_arrow_grouped_with_a_passing_line_piece_is_put_back_together_without_it() {
+    let (mut cloud, arrow) = straight_arrow_from_x10(|st| st.arrow_len_urban);
+    let min_y = arrow.iter().map(|&i| cloud.y[i]).fold(f64::INFINITY, f64::min);
+    let line = fill(&mut cloud, &rect(12.5, min_y - 0.35 - 0.075, 5.0, 0.15), 0.0);
+    let (shaft, head): (Vec<usize>, Vec<usize>) = arrow.iter().partition(|&&i| cloud.x[i] < 13.0);
+    let dir = [1.0, 0.0];
+    let mut cands = vec![
+        candidate(&cloud, shaft, MarkingClass::DashedLine, 0.8, dir),
+        candidate(&cloud, head, MarkingClass::Unknown, 0.4, dir),
+        candidate(&cloud, line.clone(), MarkingClass::DashedLine, 0.8, dir),
+    ];
+    let mut all: Vec<usize> = arrow.iter().chain(&line).copied().collect();
+    all.sort_unstable();
+    let whole = std::sync::Arc::new(candidate(&cloud, all, MarkingClass::Unknown, 0.0, dir));
+    let mut only_arrow = arrow.clone();
+    only_arrow.sort_unstable();
+    let alt = std::sync::Arc::new(candidate(&cloud, only_arrow, MarkingClass::Unknown, 0.0, dir));
+    for c in &mut cands {
+        c.whole = Some(std::sync::Arc::clone(&whole));
+    }
+    for c in &mut cands[..2] {
+        c.alternatives.push(std::sync::Arc::clone(&alt));
+    }
+    let params = refine::Params {
+        mode: refine::Mode::On,
+        ..refine::Params::default()
+    };
+    // Without the alternative the group stays apart: with the line it is no arrow.
+    let mut without: Vec<Candidate> = cands.clone();
+    without.iter_mut().for_each(|c| c.alternatives.clear());
+    refine::refine(&mut without, &cloud, &params).unwrap();
+    assert_eq!(
+        without.len(),
+        3,
+        "{:?}",
+        without.iter().map(|c| c.class).collect::<Vec<_>>()
+    );
+    let stats = refine::refine(&mut cands, &cloud, &params).unwrap();
+    let classes: Vec<_> = cands.iter().map(|c| (c.class, c.indices.len())).collect();
+    assert_eq!(stats.reassembled, 1, "{classes:?}");
+    assert_eq!(cands.len(), 2, "{classes:?}");
+    assert_eq!(cands[0].class, MarkingClass::StraightArrow, "{classes:?}");
+    assert_eq!(cands[0].indices.len(), arrow.len());
+    assert_eq!(cands[1].indices, line);
 }

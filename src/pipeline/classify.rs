@@ -286,6 +286,13 @@ pub struct Candidate {
     /// branch that broke off at a worn spot lies beside its peeled shaft and head).
     #[serde(skip)]
     pub group: Option<Arc<Candidate>>,
+    /// For a piece of a group of fragments that holds line pieces (see `group_fragments`):
+    /// the group's union without one of those line pieces, one union per line piece left
+    /// out. A lane line passing a far arrow's head within half a metre is grouped with it,
+    /// and the union with the line is no painted object; offered beside `whole`, the most
+    /// probable painted object of them wins.
+    #[serde(skip)]
+    pub alternatives: Vec<Arc<Candidate>>,
 }
 
 /// Longest single painted object (m): GB 5768 highway arrows are 9 m, MUTCD arrows ≤ 7.3 m.
@@ -430,6 +437,7 @@ fn describe(
         line,
         whole: None,
         group: None,
+        alternatives: Vec::new(),
     }
 }
 
@@ -647,7 +655,11 @@ pub fn drop_thin_strokes(candidates: &mut Vec<Candidate>, p: &Params) -> usize {
 /// no painted object (an arrow whose turning branch broke off its shaft at a worn spot is
 /// a peeled shaft-and-head cluster and a branch beside it). Dashes alone never form a
 /// group: a dashed line is no object; nor is a piece of a line longer than any painted
-/// object offered ([`in_long_lines`]: a lane line passing a far arrow's head).
+/// object offered ([`in_long_lines`]: a lane line passing a far arrow's head). A group of
+/// fragments (no peeled cluster) that holds line pieces is also offered without each of
+/// its [`MAX_ALTERNATIVES`] longest (`Candidate::alternatives`): the piece of a lane line
+/// whose other pieces are too far apart to chain still joins the group of the arrow it
+/// passes, and the learned classifier picks the union that is one painted object.
 /// Line pieces that are part of a line longer than any painted object: kept line pieces
 /// chained end to end (the next one starting within [`CONTINUATION_GAP_M`] beyond the end
 /// of the last, at the same offset ± [`CONTINUATION_OFFSET_M`]) over more than
@@ -768,6 +780,16 @@ fn group_fragments(
     }
     // Dropped pieces are classed `unknown`; a group needs a kept piece to carry its whole.
     let mut wholes: Vec<(Vec<usize>, Candidate, bool)> = Vec::new();
+    let mut alternatives: Vec<(Vec<usize>, Candidate)> = Vec::new();
+    let union_of = |units: &[usize]| {
+        let mut idx: Vec<usize> = units
+            .iter()
+            .flat_map(|&f| unit_points[f].iter().copied())
+            .collect();
+        idx.sort_unstable();
+        idx.dedup();
+        describe(xy, intensity, idx, refl, p)
+    };
     for group in groups.into_values().filter(|g| g.len() >= 2) {
         let members: Vec<usize> = group.iter().flat_map(|&f| units[f].1.iter().copied()).collect();
         let peeled = group.iter().any(|&f| units[f].0.is_some());
@@ -775,15 +797,33 @@ fn group_fragments(
         if !suspect || !members.iter().any(|&k| items[k].1.is_none()) {
             continue;
         }
-        let mut idx: Vec<usize> = group
-            .iter()
-            .flat_map(|&f| unit_points[f].iter().copied())
-            .collect();
-        idx.sort_unstable();
-        idx.dedup();
-        let union = describe(xy, intensity, idx, refl, p);
+        let union = union_of(&group);
         if union.shape.length_m <= MAX_OBJECT_LENGTH_M {
             wholes.push((members, union, peeled));
+        }
+        if peeled {
+            continue;
+        }
+        // The group without one of its line pieces, for each of the longest few.
+        let mut lines: Vec<usize> = group
+            .iter()
+            .copied()
+            .filter(|&f| is_line_piece(&items[units[f].1[0]]))
+            .collect();
+        lines.sort_by(|&a, &b| {
+            let len = |f: usize| items[units[f].1[0]].0.shape.length_m;
+            len(b).total_cmp(&len(a)).then(a.cmp(&b))
+        });
+        for &out in lines.iter().take(MAX_ALTERNATIVES) {
+            let rest: Vec<usize> = group.iter().copied().filter(|&f| f != out).collect();
+            let members: Vec<usize> = rest.iter().map(|&f| units[f].1[0]).collect();
+            if rest.len() < 2 || !members.iter().any(|&k| items[k].1.is_none()) {
+                continue;
+            }
+            let union = union_of(&rest);
+            if union.shape.length_m <= MAX_OBJECT_LENGTH_M {
+                alternatives.push((members, union));
+            }
         }
     }
     drop(unit_points);
@@ -797,20 +837,41 @@ fn group_fragments(
             }
         }
     }
+    for (members, union) in alternatives {
+        let union = Arc::new(union);
+        for &k in &members {
+            items[k].0.alternatives.push(Arc::clone(&union));
+        }
+    }
 }
 
-/// The distinct unions (`whole` or `group`) that `of` finds on the items, in order of
-/// first appearance, each with the indices of the items that point to it.
-pub fn shared_unions<T>(
-    items: &[T],
-    of: impl Fn(&T) -> Option<&Arc<Candidate>>,
-) -> Vec<(Arc<Candidate>, Vec<usize>)> {
+/// Most unions of a group without one of its line pieces (see [`group_fragments`]).
+const MAX_ALTERNATIVES: usize = 3;
+/// Shortest line piece (m) that [`group_fragments`] offers a group without.
+const ALTERNATIVE_LINE_MIN_M: f64 = 1.5;
+
+/// A kept piece of a line along the road at least [`ALTERNATIVE_LINE_MIN_M`] long: the
+/// shaft of an arrow, or a piece of the lane line passing it.
+fn is_line_piece((c, d): &(Candidate, Option<DropReason>)) -> bool {
+    d.is_none()
+        && c.line.is_some()
+        && matches!(c.class, MarkingClass::DashedLine | MarkingClass::SolidLine)
+        && c.shape.length_m >= ALTERNATIVE_LINE_MIN_M
+}
+
+/// The distinct unions (`whole`, `group` or `alternatives`) that `of` finds on the items,
+/// in order of first appearance, each with the indices of the items that point to it.
+pub fn shared_unions<'a, T, I>(items: &'a [T], of: impl Fn(&'a T) -> I) -> Vec<(Arc<Candidate>, Vec<usize>)>
+where
+    I: IntoIterator<Item = &'a Arc<Candidate>>,
+{
     let mut out: Vec<(Arc<Candidate>, Vec<usize>)> = Vec::new();
     for (i, item) in items.iter().enumerate() {
-        let Some(w) = of(item) else { continue };
-        match out.iter_mut().find(|(x, _)| Arc::ptr_eq(x, w)) {
-            Some((_, members)) => members.push(i),
-            None => out.push((Arc::clone(w), vec![i])),
+        for w in of(item) {
+            match out.iter_mut().find(|(x, _)| Arc::ptr_eq(x, w)) {
+                Some((_, members)) => members.push(i),
+                None => out.push((Arc::clone(w), vec![i])),
+            }
         }
     }
     out
@@ -1593,6 +1654,57 @@ mod tests {
         two.iter_mut()
             .for_each(|(c, _)| c.class = MarkingClass::DashedLine);
         assert_eq!(in_long_lines(&two, &p), [false, false]);
+    }
+
+    /// The sparse arrow with a lane line's 4.5 m piece passing 0.35 m from its head, the
+    /// line's other pieces too far away to chain (no long line): the group's whole holds the
+    /// line piece, and the group without it (shaft and head) and without the shaft (head and
+    /// line piece) are offered as alternatives, to the head and to the other remaining
+    /// pieces; the left-out piece is given neither.
+    #[test]
+    fn a_group_is_also_offered_without_each_of_its_line_pieces() {
+        let mut xy: Vec<[f64; 2]> = Vec::new();
+        let groups = vec![
+            block(&mut xy, 10.0, 12.0, 1.0, 1.15), // shaft
+            block(&mut xy, 12.3, 12.9, 0.8, 1.4),  // head
+            block(&mut xy, 9.5, 14.0, 1.75, 1.9),  // the lane line's piece
+        ];
+        let intensity = vec![100.0f32; xy.len()];
+        let (r, p) = (refl(), Params::default());
+        let mut items = kept(&xy, &intensity, &groups, &r, &p);
+        for k in [0, 2] {
+            items[k].0.class = MarkingClass::DashedLine;
+            assert!(items[k].0.line.is_some(), "piece {k} is a line piece");
+        }
+        items[1].0.class = MarkingClass::Unknown;
+        group_fragments(&mut items, &xy, &intensity, &r, &p);
+        let whole = items[1].0.whole.as_ref().expect("grouped");
+        assert_eq!(whole.indices.len(), xy.len());
+        let sizes =
+            |k: usize| -> Vec<usize> { items[k].0.alternatives.iter().map(|a| a.indices.len()).collect() };
+        let (shaft, head, line) = (groups[0].len(), groups[1].len(), groups[2].len());
+        // The longest line piece is left out first.
+        assert_eq!(sizes(1), [shaft + head, head + line]);
+        assert_eq!(sizes(0), [shaft + head]);
+        assert_eq!(sizes(2), [head + line]);
+        let (a, b) = (&items[0].0.alternatives[0], &items[1].0.alternatives[0]);
+        assert!(Arc::ptr_eq(a, b), "one union shared by its pieces");
+        // With no line piece in the group there is no alternative.
+        let mut two = kept(
+            &xy,
+            &intensity,
+            &groups[1..2]
+                .iter()
+                .chain(&groups[..1])
+                .cloned()
+                .collect::<Vec<_>>(),
+            &r,
+            &p,
+        );
+        two[1].0.class = MarkingClass::Unknown;
+        two[0].0.class = MarkingClass::Unknown;
+        group_fragments(&mut two, &xy, &intensity, &r, &p);
+        assert!(two.iter().all(|(c, _)| c.alternatives.is_empty()));
     }
 
     /// A hatched area: four lines 2 m apart (more than the first three rounds peel) with
