@@ -8,8 +8,9 @@
 //!   in Yao 2021 for guidelines): Delaunay triangles (spade) with circumradius ≤ R are kept;
 //!   boundary edges belong to exactly one kept triangle and are chained into rings; the ring
 //!   of largest area of the largest connected piece is the outline. R starts at `max(0.15 m, 3 × point spacing)` and
-//!   doubles (up to 3 times) while the outline holds < 80 % of the points; the convex hull
-//!   is the last resort. The ring is then grown by half the point spacing (geo's buffer):
+//!   doubles (up to 3 times) while the outline holds < 80 % of the points; if none does,
+//!   the largest R's outline holding ≥ 50 % (pieces farther apart than R: a far arrow's
+//!   scan rows), and the convex hull only as the last resort. The ring is then grown by half the point spacing (geo's buffer):
 //!   the painted edge lies that far beyond the outermost points on average.
 //!
 //! Complexity: O(n log n) for the alpha shape of n points; linear for the others.
@@ -223,9 +224,16 @@ pub fn alpha_shape(pts: &[[f64; 2]], radius: f64) -> Option<(Vec<[f64; 2]>, f64)
 /// into pieces a scan row apart, insisting on 95 % made its outline nearly convex (3.2 m²
 /// for a 1.45 m² arrow); 80 % keeps the concave shape and still takes in worn-off parts.
 const ALPHA_MIN_INSIDE: f64 = 0.8;
+/// Share of its points the largest alpha shape tried must hold to be the outline when none
+/// holds [`ALPHA_MIN_INSIDE`]; below it the convex hull is the last resort. Such a cluster
+/// is pieces farther apart than the largest radius (a far arrow seen as a few scan rows,
+/// strays beside a line piece): their hull covered 2–3 times a far arrow's painted area and
+/// 29 m² for a 35 m solid-line piece on a simulated urban drive.
+const ALPHA_FALLBACK_INSIDE: f64 = 0.5;
 
-/// Alpha-shape outline holding at least [`ALPHA_MIN_INSIDE`] of the points (radius grown as needed), else
-/// the convex hull, grown outward by half the point spacing. `spacing` is the typical
+/// Alpha-shape outline holding at least [`ALPHA_MIN_INSIDE`] of the points (radius grown as
+/// needed), else the largest radius' shape if it holds [`ALPHA_FALLBACK_INSIDE`], else the
+/// convex hull; grown outward by half the point spacing. `spacing` is the typical
 /// point spacing.
 ///
 /// The alpha shape runs through the outermost points, but each point samples the paint
@@ -234,15 +242,20 @@ const ALPHA_MIN_INSIDE: f64 = 0.8;
 /// grown by that much.
 pub fn irregular(pts: &[[f64; 2]], spacing: f64) -> Vec<[f64; 2]> {
     let mut r = (3.0 * spacing).max(0.15);
+    let mut last = None;
     for _ in 0..4 {
-        if let Some((ring, frac)) = alpha_shape(pts, r)
-            && frac >= ALPHA_MIN_INSIDE
+        last = alpha_shape(pts, r);
+        if let Some((ring, frac)) = &last
+            && *frac >= ALPHA_MIN_INSIDE
         {
-            return grown(&ring, 0.5 * spacing);
+            return grown(ring, 0.5 * spacing);
         }
         r *= 2.0;
     }
-    grown(&convex_hull(pts), 0.5 * spacing)
+    match last {
+        Some((ring, frac)) if frac >= ALPHA_FALLBACK_INSIDE => grown(&ring, 0.5 * spacing),
+        _ => grown(&convex_hull(pts), 0.5 * spacing),
+    }
 }
 
 /// The ring grown outward by `d` (mitred corners); the ring itself when `d` <= 0 or the
@@ -429,6 +442,34 @@ mod tests {
         }
         let a = area(&irregular(&pts, 0.05));
         assert!((a - 1.1).abs() < 0.05, "area {a}");
+    }
+
+    /// The block with a third of the points in a second block 3 m off (beyond any alpha
+    /// radius tried): no alpha shape holds 80 % of the points, and the outline is the larger
+    /// block's, not the convex hull of both (a far arrow seen as a few scan rows, and a 35 m
+    /// solid-line piece with strays, had 3–29 m² hulls). Below half the points the hull
+    /// stays the last resort.
+    #[test]
+    fn without_a_shape_holding_most_points_the_largest_piece_beats_the_hull() {
+        let grid = |x0: f64, n: usize| -> Vec<[f64; 2]> {
+            (0..=n)
+                .flat_map(|i| (0..=n).map(move |j| [x0 + i as f64 * 0.05, j as f64 * 0.05]))
+                .collect()
+        };
+        let mut pts = grid(0.0, 20);
+        pts.extend(grid(4.0, 14));
+        let (big, small) = (21.0 * 21.0, 15.0 * 15.0);
+        assert!(big / (big + small) < ALPHA_MIN_INSIDE && big / (big + small) >= ALPHA_FALLBACK_INSIDE);
+        let ring = irregular(&pts, 0.05);
+        let a = area(&ring);
+        assert!((a - 1.1).abs() < 0.05, "area {a}");
+        assert!(!contains(&ring, [4.3, 0.3], 0.0));
+        // Three equal blocks: none holds half the points; the hull spans them all.
+        let mut three = grid(0.0, 10);
+        three.extend(grid(4.0, 10));
+        three.extend(grid(8.0, 10));
+        let hull = irregular(&three, 0.05);
+        assert!(contains(&hull, [4.25, 0.25], 0.0) && contains(&hull, [0.25, 0.25], 0.0));
     }
 
     #[test]
