@@ -442,6 +442,42 @@ fn a_confident_dash_is_overruled_only_into_a_painted_object_the_network_is_sure_
     assert_eq!(lone[0].class, MarkingClass::DashedLine);
 }
 
+/// A solid piece no longer than a painted object is shown to the network like a confident
+/// dash, and becomes the painted object the network is sure of (here the straight arrow
+/// fixture); a longer solid piece is a lane line and is not examined.
+#[test]
+fn a_short_solid_piece_is_overruled_into_a_painted_object_a_long_one_is_not_examined() {
+    let dir: [f64; 2] = [0.8, -0.6];
+    let mut cloud = PointCloud::with_origin([500_000.0, 4_000_000.0, 10.0]);
+    let fx = fixtures(&mut cloud, dir[1].atan2(dir[0]), [0.0, 0.0]);
+    let (_, arrow) = &fx[0];
+    let params = refine::Params {
+        mode: refine::Mode::On,
+        ..refine::Params::default()
+    };
+    let mut short = vec![candidate(
+        &cloud,
+        arrow.clone(),
+        MarkingClass::SolidLine,
+        0.9,
+        dir,
+    )];
+    let stats = refine::refine(&mut short, &cloud, &params).unwrap();
+    assert_eq!((stats.examined, stats.reclassified), (1, 1));
+    assert_eq!(short[0].class, MarkingClass::StraightArrow);
+    let mut long = vec![candidate(
+        &cloud,
+        arrow.clone(),
+        MarkingClass::SolidLine,
+        0.9,
+        dir,
+    )];
+    long[0].shape.length_m = classify::MAX_OBJECT_LENGTH_M + 1.0;
+    let stats = refine::refine(&mut long, &cloud, &params).unwrap();
+    assert_eq!((stats.examined, stats.reclassified), (0, 0));
+    assert_eq!(long[0].class, MarkingClass::SolidLine);
+}
+
 /// A straight drive along +x from x = −20 to 40, 3.5 m to the right of y = 0.
 fn drive_along_x() -> Trajectory {
     let poses: Vec<Pose> = (0..=60)

@@ -3,8 +3,8 @@
 //!
 //! # What
 //! [`refine`] takes the classify stage's candidates and, for each one left `unknown`,
-//! classified with a confidence below [`Params::decisive_confidence`], or a dash, asks the
-//! network.
+//! classified with a confidence below [`Params::decisive_confidence`], a dash, or a solid
+//! piece no longer than a painted object, asks the network.
 //! Decisive geometric results (long solid lines, stop lines, crosswalk stripes the rules are
 //! sure of) are left alone: the rules are exact there and the network is not needed.
 //!
@@ -20,8 +20,9 @@
 //!      class with low confidence is overruled; when both agree the larger confidence stays);
 //!    - network below the threshold (or says `unknown`): the candidate keeps its geometric
 //!      class; an `unknown` candidate gets confidence = the network's `unknown` confidence;
-//!    - a confident dash (the rules' bar test cannot tell a dash from a straight arrow whose
-//!      head is worn or too sparsely scanned, or from a lone stop line along the road) keeps
+//!    - a confident dash or a solid piece no longer than a painted object (the rules' bar
+//!      test cannot tell a dash from a straight arrow whose head is worn or too sparsely
+//!      scanned, nor a line piece from a lone stop line along the road) keeps
 //!      its class unless the network names another painted object — an arrow, a diamond, a
 //!      guideline or stop line, never a line or a crosswalk stripe (the rules found no
 //!      stripe beside it) — with probability ≥ `dash_overrule_confidence`.
@@ -56,7 +57,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{Classifier, ClusterPoints};
 use crate::pipeline::PipelineError;
-use crate::pipeline::classify::{Candidate, shared_unions};
+use crate::pipeline::classify::{Candidate, MAX_OBJECT_LENGTH_M, shared_unions};
 use crate::pipeline::types::{MarkingClass, PointCloud};
 
 /// When the learned classifier runs.
@@ -160,8 +161,13 @@ pub fn refine_with(
 ) -> Result<RefineStats, PipelineError> {
     // A confident dash is still shown to the network, which may only turn it into another
     // painted object, and only when sure (`dash_overrule_confidence`).
-    let confident_dash =
-        |c: &Candidate| c.class == MarkingClass::DashedLine && c.confidence >= params.decisive_confidence;
+    // So is a solid piece no longer than a painted object: a lone stop line along the road
+    // (across a side street's mouth) is a solid piece to the rules.
+    let short_solid =
+        |c: &Candidate| c.class == MarkingClass::SolidLine && c.shape.length_m <= MAX_OBJECT_LENGTH_M;
+    let confident_dash = |c: &Candidate| {
+        (c.class == MarkingClass::DashedLine || short_solid(c)) && c.confidence >= params.decisive_confidence
+    };
     let selected: Vec<usize> = candidates
         .iter()
         .enumerate()
@@ -169,6 +175,7 @@ pub fn refine_with(
             !c.indices.is_empty()
                 && (c.class == MarkingClass::Unknown
                     || c.class == MarkingClass::DashedLine
+                    || short_solid(c)
                     || c.confidence < params.decisive_confidence)
         })
         .map(|(i, _)| i)
