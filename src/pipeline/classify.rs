@@ -880,9 +880,10 @@ where
 /// Split painted lines off a long cluster that is not one line (see `assess`): in the
 /// trajectory frame, per 0.5 m mileage slice, the offsets form runs (intervals without a
 /// gap > 0.1 m or 1.5 point spacings); a dynamic programme over the slices finds the
-/// longest track of line-wide runs (≤ `line_max_width_m`) with near-constant offset
-/// (≤ 0.1 m + 0.02 m per skipped slice from one to the next, up to 4 slices skipped where
-/// something crosses the line). A track at least `solid_min_length_m` long takes every
+/// longest track of line-wide runs (≤ `line_max_width_m`) with near-constant offset or
+/// slope (the next run within 0.1 m + 0.02 m per skipped slice of the last one's offset,
+/// or of where the track's smoothed slope leads: a ramp's line diverges from the drive;
+/// up to 4 slices skipped where something crosses the line). A track at least `solid_min_length_m` long takes every
 /// point within its half width (+3 cm) of the track's centre; the rest is re-clustered
 /// (0.25 m components) and peeled again, up to [`PEEL_ROUNDS`] lines; points just beyond a
 /// peeled track ([`PEEL_EDGE_M`]) go with no piece. Cost: O(m log m) for m points.
@@ -946,6 +947,9 @@ fn peel_lines(
     out
 }
 
+/// Largest offset change per 0.5 m slice (m) a line track's slope is taken as (~17°).
+const MAX_DRIFT_PER_SLICE: f64 = 0.15;
+
 /// Lines peeled off one cluster at most (a gore: two edge lines, the lines they meet,
 /// the lane lines beside them).
 const PEEL_ROUNDS: usize = 6;
@@ -989,22 +993,30 @@ fn line_track(so: &[[f64; 2]], s_lo: f64, s_hi: f64, p: &Params) -> Option<impl 
         r.retain(|q| q.1 - q.0 <= p.line_max_width_m);
         runs.push(r);
     }
-    // DP: best[k][j] = (track length in slices, previous (k, j)).
+    // DP: best[k][j] = (track length in slices, previous (k, j), offset change per slice).
+    // A run continues a track when it lies at the track's offset or where the track's
+    // slope leads (a ramp's line diverging from the drive drifts ~0.07 m per slice, and
+    // across the 2-4 slices a gore's chevrons block that exceeds the plain tolerance).
     type Back = Option<(usize, usize)>;
-    let mut best: Vec<Vec<(usize, Back)>> = runs.iter().map(|r| vec![(1, None); r.len()]).collect();
+    let mut best: Vec<Vec<(usize, Back, f64)>> = runs.iter().map(|r| vec![(1, None, 0.0); r.len()]).collect();
     for k in 0..ns {
         for j in 0..runs[k].len() {
             let c = 0.5 * (runs[k][j].0 + runs[k][j].1);
-            let mut b = (1usize, None);
+            let mut b = (1usize, None, 0.0);
             for back in 1..=MAX_SKIP + 1 {
                 if back > k {
                     break;
                 }
                 let kk = k - back;
+                let tol = 0.1 + 0.02 * (back - 1) as f64;
                 for (jj, r) in runs[kk].iter().enumerate() {
                     let cc = 0.5 * (r.0 + r.1);
-                    if (c - cc).abs() <= 0.1 + 0.02 * (back - 1) as f64 && best[kk][jj].0 + 1 > b.0 {
-                        b = (best[kk][jj].0 + 1, Some((kk, jj)));
+                    let (len, _, slope) = best[kk][jj];
+                    let led = (c - (cc + slope * back as f64)).abs() <= tol;
+                    if ((c - cc).abs() <= tol || led) && len + 1 > b.0 {
+                        let step = ((c - cc) / back as f64).clamp(-MAX_DRIFT_PER_SLICE, MAX_DRIFT_PER_SLICE);
+                        let slope = if len == 1 { step } else { 0.5 * (slope + step) };
+                        b = (len + 1, Some((kk, jj)), slope);
                     }
                 }
             }
@@ -1397,6 +1409,26 @@ fn stripe_neighbours(a: &Shape, b: &Shape, max_d: f64) -> bool {
             <= 0.5 * a.length_m.max(b.length_m)
 }
 
+/// Two guideline stripes of one hatched area: like [`stripe_neighbours`], but the next
+/// stripe lies along the road (within [`CHEVRON_REPEAT_MAX_DEG`] of the driving direction)
+/// rather than side by side. Chevrons at 45° to the road, 2.5 m apart along it, are each
+/// shifted 1.8 m along their own axis from the next: more than half the length of those
+/// near the gore's tip (1.6-2.8 m), which the side-by-side test then left alone.
+fn chevron_neighbours(a: &Shape, b: &Shape, max_d: f64) -> bool {
+    let v = [b.center[0] - a.center[0], b.center[1] - a.center[1]];
+    let d = v[0].hypot(v[1]);
+    d > 0.0
+        && d <= max_d
+        && geom::acute_angle_deg(a.axis, b.axis) <= 10.0
+        && a.width_m.min(b.width_m) >= 0.6 * a.width_m.max(b.width_m)
+        && a.length_m.min(b.length_m) >= 0.5 * a.length_m.max(b.length_m)
+        && geom::acute_angle_deg([v[0] / d, v[1] / d], a.driving_direction) <= CHEVRON_REPEAT_MAX_DEG
+}
+
+/// Largest angle (deg) between the driving direction and the step from one guideline
+/// stripe to the next ([`chevron_neighbours`]).
+const CHEVRON_REPEAT_MAX_DEG: f64 = 30.0;
+
 /// Crosswalk and guideline stripes need a parallel neighbour of similar size; lone ones
 /// become `unknown` (or noise when steep).
 fn confirm_groups(items: &mut [(Candidate, Option<DropReason>)]) {
@@ -1427,9 +1459,12 @@ fn confirm_groups(items: &mut [(Candidate, Option<DropReason>)]) {
         let max_d = if kind == MarkingClass::Crosswalk { 2.5 } else { 6.0 };
         for &i in &idx {
             let a = &items[i].0.shape;
-            let ok = idx
-                .iter()
-                .any(|&j| j != i && stripe_neighbours(a, &items[j].0.shape, max_d));
+            let ok = idx.iter().any(|&j| {
+                let b = &items[j].0.shape;
+                j != i
+                    && (stripe_neighbours(a, b, max_d)
+                        || (kind == MarkingClass::Guideline && chevron_neighbours(a, b, max_d)))
+            });
             verdict[i] = Some(ok);
         }
     }
@@ -1799,6 +1834,112 @@ mod tests {
             "{:?}",
             out.iter().map(|c| c.indices.len()).collect::<Vec<_>>()
         );
+    }
+
+    /// A gore's edge line diverging from the drive (offset +0.13 m per m, 7.4°) with 0.45 m
+    /// chevrons leaving it at 75° every 2.2 m: the chevrons block 2-3 slices at a time,
+    /// across which the line's offset drifts beyond the plain tolerance. Its slope leads
+    /// the track on: the line is peeled and the ten chevrons come apart.
+    #[test]
+    fn a_diverging_line_with_chevrons_is_peeled() {
+        let (r, p) = (refl(), Params::default());
+        let mut xy: Vec<[f64; 2]> = Vec::new();
+        let norm = 1.0f64.hypot(0.13);
+        let u = [1.0 / norm, 0.13 / norm];
+        let n = [-u[1], u[0]];
+        let mut t = 0.0;
+        while t <= 24.0 {
+            let mut q = -0.075;
+            while q <= 0.075 {
+                xy.push([t * u[0] + q * n[0], t * u[1] + q * n[1]]);
+                q += 0.03;
+            }
+            t += 0.03;
+        }
+        let (c75, s75) = (75f64.to_radians().cos(), 75f64.to_radians().sin());
+        let w = [c75 * u[0] - s75 * u[1], s75 * u[0] + c75 * u[1]];
+        let wn = [-w[1], w[0]];
+        for k in 0..10 {
+            let b = [(1.0 + 2.2 * k as f64) * u[0], (1.0 + 2.2 * k as f64) * u[1]];
+            let mut a = 0.0;
+            while a <= 2.5 {
+                let mut q = -0.225;
+                while q <= 0.225 {
+                    xy.push([b[0] + a * w[0] + q * wn[0], b[1] + a * w[1] + q * wn[1]]);
+                    q += 0.03;
+                }
+                a += 0.03;
+            }
+        }
+        let intensity = vec![100.0f32; xy.len()];
+        let whole = describe(&xy, &intensity, (0..xy.len()).collect(), &r, &p);
+        assert!(whole.line.is_none());
+        let out = peel_lines(whole, &xy, &intensity, &r, &p);
+        let summary: Vec<_> = out.iter().map(|c| (c.line.is_some(), c.indices.len())).collect();
+        let lines: Vec<&Candidate> = out.iter().filter(|c| c.line.is_some()).collect();
+        assert_eq!(lines.len(), 1, "{summary:?}");
+        assert!(lines[0].shape.length_m > 20.0, "{:?}", lines[0].shape);
+        let stripes = out
+            .iter()
+            .filter(|c| c.line.is_none() && c.indices.len() > 300)
+            .count();
+        assert_eq!(stripes, 10, "{summary:?}");
+    }
+
+    /// Chevrons at 45° to the road, 2.5 m apart along it and growing from 1.6 to 3.4 m
+    /// long (a gore's tip): each is shifted 1.8 m along its own axis from the next, more
+    /// than half the length of the short ones, yet all are confirmed as guideline stripes.
+    /// A lone stripe is not.
+    #[test]
+    fn chevrons_repeated_along_the_road_confirm_each_other() {
+        let (r, p) = (refl(), Params::default());
+        let mut xy: Vec<[f64; 2]> = Vec::new();
+        let c45 = std::f64::consts::FRAC_1_SQRT_2;
+        let (w, wn) = ([c45, c45], [-c45, c45]);
+        let mut groups = Vec::new();
+        for (k, len) in [1.6, 2.0, 2.4, 2.8, 3.4].into_iter().enumerate() {
+            // Lower end on the line o = 1 at x = 10 + 2.5 k.
+            let b = [10.0 + 2.5 * k as f64, 1.0];
+            let first = xy.len();
+            let mut a = 0.0;
+            while a <= len {
+                let mut q = -0.2;
+                while q <= 0.2 {
+                    xy.push([b[0] + a * w[0] + q * wn[0], b[1] + a * w[1] + q * wn[1]]);
+                    q += 0.03;
+                }
+                a += 0.03;
+            }
+            groups.push((first..xy.len()).collect::<Vec<usize>>());
+        }
+        // A lone stripe 30 m on.
+        let first = xy.len();
+        for i in 0..60 {
+            for j in 0..14 {
+                let (a, q) = (i as f64 * 0.03, -0.2 + j as f64 * 0.03);
+                xy.push([45.0 + a * w[0] + q * wn[0], 1.0 + a * w[1] + q * wn[1]]);
+            }
+        }
+        groups.push((first..xy.len()).collect());
+        let intensity = vec![100.0f32; xy.len()];
+        let mut items: Vec<(Candidate, Option<DropReason>)> = groups
+            .into_iter()
+            .map(|g| rule(describe(&xy, &intensity, g, &r, &p), &p))
+            .collect();
+        assert!(
+            items
+                .iter()
+                .all(|(c, d)| d.is_none() && c.class == MarkingClass::Guideline)
+        );
+        confirm_groups(&mut items);
+        let classes: Vec<_> = items.iter().map(|(c, d)| (c.class, *d)).collect();
+        assert!(
+            items[..5]
+                .iter()
+                .all(|(c, d)| d.is_none() && c.class == MarkingClass::Guideline),
+            "{classes:?}"
+        );
+        assert_ne!(items[5].0.class, MarkingClass::Guideline, "{classes:?}");
     }
 
     /// A zebra stripe across a side street (0.45 m wide along the trajectory, across it
