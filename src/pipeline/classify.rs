@@ -883,8 +883,9 @@ where
 /// longest track of line-wide runs (≤ `line_max_width_m`) with near-constant offset or
 /// slope (the next run within 0.1 m + 0.02 m per skipped slice of the last one's offset,
 /// or of where the track's smoothed slope leads: a ramp's line diverges from the drive;
-/// up to 4 slices skipped where something crosses the line). A track at least `solid_min_length_m` long takes every
-/// point within its half width (+3 cm) of the track's centre; the rest is re-clustered
+/// up to 4 slices skipped where something crosses the line). A track at least
+/// `solid_min_length_m` long takes every point within its half width (+3 cm) of the
+/// track's centre; the rest is re-clustered
 /// (0.25 m components) and peeled again, up to [`PEEL_ROUNDS`] lines; points just beyond a
 /// peeled track ([`PEEL_EDGE_M`]) go with no piece. Cost: O(m log m) for m points.
 fn peel_lines(
@@ -1401,12 +1402,18 @@ fn rule(mut c: Candidate, p: &Params) -> (Candidate, Option<DropReason>) {
 /// Two stripes of one group: centres ≤ `max_d` apart, parallel, similar size, side by side
 /// (not one after the other).
 fn stripe_neighbours(a: &Shape, b: &Shape, max_d: f64) -> bool {
+    similar_stripes(a, b, max_d)
+        && ((b.center[0] - a.center[0]) * a.axis[0] + (b.center[1] - a.center[1]) * a.axis[1]).abs()
+            <= 0.5 * a.length_m.max(b.length_m)
+}
+
+/// Two stripes of one group, wherever the one lies from the other: centres ≤ `max_d`
+/// apart, parallel, similar size.
+fn similar_stripes(a: &Shape, b: &Shape, max_d: f64) -> bool {
     (a.center[0] - b.center[0]).hypot(a.center[1] - b.center[1]) <= max_d
         && geom::acute_angle_deg(a.axis, b.axis) <= 10.0
         && a.width_m.min(b.width_m) >= 0.6 * a.width_m.max(b.width_m)
         && a.length_m.min(b.length_m) >= 0.5 * a.length_m.max(b.length_m)
-        && ((b.center[0] - a.center[0]) * a.axis[0] + (b.center[1] - a.center[1]) * a.axis[1]).abs()
-            <= 0.5 * a.length_m.max(b.length_m)
 }
 
 /// Two guideline stripes of one hatched area: like [`stripe_neighbours`], but the next
@@ -1418,10 +1425,7 @@ fn chevron_neighbours(a: &Shape, b: &Shape, max_d: f64) -> bool {
     let v = [b.center[0] - a.center[0], b.center[1] - a.center[1]];
     let d = v[0].hypot(v[1]);
     d > 0.0
-        && d <= max_d
-        && geom::acute_angle_deg(a.axis, b.axis) <= 10.0
-        && a.width_m.min(b.width_m) >= 0.6 * a.width_m.max(b.width_m)
-        && a.length_m.min(b.length_m) >= 0.5 * a.length_m.max(b.length_m)
+        && similar_stripes(a, b, max_d)
         && geom::acute_angle_deg([v[0] / d, v[1] / d], a.driving_direction) <= CHEVRON_REPEAT_MAX_DEG
 }
 
@@ -1521,6 +1525,23 @@ mod tests {
                 y += 0.03;
             }
             x += 0.03;
+        }
+        (start..xy.len()).collect()
+    }
+
+    /// Points every 3 cm filling a bar `len` long and `width` wide from `from` along the
+    /// unit vector `axis` (centred on that line); their indices.
+    fn bar_along(xy: &mut Vec<[f64; 2]>, from: [f64; 2], axis: [f64; 2], len: f64, width: f64) -> Vec<usize> {
+        let start = xy.len();
+        let n = [-axis[1], axis[0]];
+        let mut a = 0.0;
+        while a <= len {
+            let mut q = -width / 2.0;
+            while q <= width / 2.0 {
+                xy.push([from[0] + a * axis[0] + q * n[0], from[1] + a * axis[1] + q * n[1]]);
+                q += 0.03;
+            }
+            a += 0.03;
         }
         (start..xy.len()).collect()
     }
@@ -1846,30 +1867,12 @@ mod tests {
         let mut xy: Vec<[f64; 2]> = Vec::new();
         let norm = 1.0f64.hypot(0.13);
         let u = [1.0 / norm, 0.13 / norm];
-        let n = [-u[1], u[0]];
-        let mut t = 0.0;
-        while t <= 24.0 {
-            let mut q = -0.075;
-            while q <= 0.075 {
-                xy.push([t * u[0] + q * n[0], t * u[1] + q * n[1]]);
-                q += 0.03;
-            }
-            t += 0.03;
-        }
+        bar_along(&mut xy, [0.0, 0.0], u, 24.0, 0.15);
         let (c75, s75) = (75f64.to_radians().cos(), 75f64.to_radians().sin());
         let w = [c75 * u[0] - s75 * u[1], s75 * u[0] + c75 * u[1]];
-        let wn = [-w[1], w[0]];
         for k in 0..10 {
             let b = [(1.0 + 2.2 * k as f64) * u[0], (1.0 + 2.2 * k as f64) * u[1]];
-            let mut a = 0.0;
-            while a <= 2.5 {
-                let mut q = -0.225;
-                while q <= 0.225 {
-                    xy.push([b[0] + a * w[0] + q * wn[0], b[1] + a * w[1] + q * wn[1]]);
-                    q += 0.03;
-                }
-                a += 0.03;
-            }
+            bar_along(&mut xy, b, w, 2.5, 0.45);
         }
         let intensity = vec![100.0f32; xy.len()];
         let whole = describe(&xy, &intensity, (0..xy.len()).collect(), &r, &p);
@@ -1895,32 +1898,13 @@ mod tests {
         let (r, p) = (refl(), Params::default());
         let mut xy: Vec<[f64; 2]> = Vec::new();
         let c45 = std::f64::consts::FRAC_1_SQRT_2;
-        let (w, wn) = ([c45, c45], [-c45, c45]);
-        let mut groups = Vec::new();
-        for (k, len) in [1.6, 2.0, 2.4, 2.8, 3.4].into_iter().enumerate() {
-            // Lower end on the line o = 1 at x = 10 + 2.5 k.
-            let b = [10.0 + 2.5 * k as f64, 1.0];
-            let first = xy.len();
-            let mut a = 0.0;
-            while a <= len {
-                let mut q = -0.2;
-                while q <= 0.2 {
-                    xy.push([b[0] + a * w[0] + q * wn[0], b[1] + a * w[1] + q * wn[1]]);
-                    q += 0.03;
-                }
-                a += 0.03;
-            }
-            groups.push((first..xy.len()).collect::<Vec<usize>>());
-        }
-        // A lone stripe 30 m on.
-        let first = xy.len();
-        for i in 0..60 {
-            for j in 0..14 {
-                let (a, q) = (i as f64 * 0.03, -0.2 + j as f64 * 0.03);
-                xy.push([45.0 + a * w[0] + q * wn[0], 1.0 + a * w[1] + q * wn[1]]);
-            }
-        }
-        groups.push((first..xy.len()).collect());
+        // Lower ends on the line o = 1 at x = 10 + 2.5 k; then a lone stripe 30 m on.
+        let mut groups: Vec<Vec<usize>> = [1.6, 2.0, 2.4, 2.8, 3.4]
+            .into_iter()
+            .enumerate()
+            .map(|(k, len)| bar_along(&mut xy, [10.0 + 2.5 * k as f64, 1.0], [c45, c45], len, 0.4))
+            .collect();
+        groups.push(bar_along(&mut xy, [45.0, 1.0], [c45, c45], 1.8, 0.4));
         let intensity = vec![100.0f32; xy.len()];
         let mut items: Vec<(Candidate, Option<DropReason>)> = groups
             .into_iter()

@@ -7,11 +7,12 @@
 //! - Irregular marks (arrows, diamonds, unknown) get an alpha shape (Edelsbrunner 1983, as
 //!   in Yao 2021 for guidelines): Delaunay triangles (spade) with circumradius ≤ R are kept;
 //!   boundary edges belong to exactly one kept triangle and are chained into rings; the ring
-//!   of largest area of the largest connected piece is the outline. R starts at `max(0.15 m, 3 × point spacing)` and
-//!   doubles (up to 3 times) while the outline holds < 80 % of the points; if none does,
-//!   the largest R's outline holding ≥ 50 % (pieces farther apart than R: a far arrow's
-//!   scan rows), and the convex hull only as the last resort. The ring is then grown by half the point spacing (geo's buffer):
-//!   the painted edge lies that far beyond the outermost points on average.
+//!   of largest area of the largest connected piece is the outline. R starts at
+//!   `max(0.15 m, 3 × point spacing)` and doubles (up to 3 times) while the outline holds
+//!   < 80 % of the points; if none does, the largest R's outline holding ≥ 50 % (pieces
+//!   farther apart than R: a far arrow's scan rows), and the convex hull only as the last
+//!   resort. The ring is then grown by half the point spacing (geo's buffer): the painted
+//!   edge lies that far beyond the outermost points on average.
 //!
 //! Complexity: O(n log n) for the alpha shape of n points; linear for the others.
 

@@ -165,7 +165,7 @@ pub fn refine_with(
     // (across a side street's mouth) is a solid piece to the rules.
     let short_solid =
         |c: &Candidate| c.class == MarkingClass::SolidLine && c.shape.length_m <= MAX_OBJECT_LENGTH_M;
-    let confident_dash = |c: &Candidate| {
+    let confident_bar = |c: &Candidate| {
         (c.class == MarkingClass::DashedLine || short_solid(c)) && c.confidence >= params.decisive_confidence
     };
     let selected: Vec<usize> = candidates
@@ -215,7 +215,7 @@ pub fn refine_with(
     for (&i, pred) in selected.iter().zip(preds) {
         let c = &mut candidates[i];
         let top = pred.prob(pred.class) as f64;
-        let accepted = if confident_dash(c) {
+        let accepted = if confident_bar(c) {
             pred.class == c.class || (painted_object(pred.class) && top >= overrule)
         } else {
             pred.class != MarkingClass::Unknown
