@@ -799,9 +799,7 @@ fn dash_spans(l: &lanes::LaneResult, pieces: &[Piece]) -> Vec<dashes::Span> {
 /// Lane lines of line fragments alone (written here: the lane-line growth extrapolates each
 /// piece's direction, which a few returns of one scan row do not fix). The fragments and
 /// the dashes on no lane line and not within `FRAGMENT_EXCLUSION_M` of one are chained in
-/// the trajectory frame, each to the nearest piece ahead (within
-/// `FRAGMENT_LINE_MAX_GAP_M`) whose offset differs by at most `FRAGMENT_CHAIN_TOLERANCE_M`
-/// plus 0.5 % of the gap, mutual choices only. A chain of at least `FRAGMENT_LINE_MIN` pieces
+/// the trajectory frame (see [`fragment_chains`]). A chain of at least `FRAGMENT_LINE_MIN` pieces
 /// over at least `FRAGMENT_LINE_MIN_LENGTH_M` becomes a lane line: its pieces' offsets
 /// smoothed over `FRAGMENT_LINE_SMOOTHING_M`, refitted without pieces off it by more than
 /// `FRAGMENT_TOLERANCE_M`, and dropped if it drifts across the road by more than
@@ -810,8 +808,8 @@ fn dash_spans(l: &lanes::LaneResult, pieces: &[Piece]) -> Vec<dashes::Span> {
 /// where its pieces fall on one phase of
 /// a lane-line dash design of the drive's other dashed lines (dashes at most
 /// `FRAGMENT_DESIGN_MAX_WIDTH_M` wide, the design of the most lane-line length tried
-/// first; see [`dashes::plan_on_designs`]), at least half of them are placed on painted
-/// dashes and the line spans at least 5 periods. A far lane's dashes seen as one scan row
+/// first; see [`dashes::plan_on_designs`]), at least `FRAGMENT_ON_DASH_SHARE` of them
+/// are placed on painted dashes and the line spans at least 5 periods. A far lane's dashes seen as one scan row
 /// each make such a line; scattered bright returns (a verge, sealant) and a far solid
 /// line's fragments fall on no phase and make none.
 fn fragment_lines(
@@ -864,48 +862,7 @@ fn fragment_lines(
         })
         .collect();
     free.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.2.cmp(&b.2)));
-    let n = free.len();
-    // Each piece's best next piece ahead, then mutual choices.
-    let tol = |gap: f64| FRAGMENT_CHAIN_TOLERANCE_M + 0.005 * gap;
-    let next: Vec<Option<usize>> = (0..n)
-        .map(|i| {
-            let (s, o, _) = free[i];
-            (i + 1..n)
-                .take_while(|&j| free[j].0 - s <= FRAGMENT_LINE_MAX_GAP_M)
-                .filter(|&j| free[j].0 - s > 0.3 && (free[j].1 - o).abs() <= tol(free[j].0 - s))
-                .min_by(|&x, &y| {
-                    let c = |j: usize| {
-                        (free[j].1 - o).abs() / tol(free[j].0 - s) + (free[j].0 - s) / FRAGMENT_LINE_MAX_GAP_M
-                    };
-                    c(x).total_cmp(&c(y))
-                })
-        })
-        .collect();
-    let mut prev: Vec<Option<usize>> = vec![None; n];
-    for i in 0..n {
-        if let Some(j) = next[i] {
-            // The piece j takes the nearest-in-offset of the pieces choosing it.
-            let better =
-                prev[j].is_none_or(|p| (free[i].1 - free[j].1).abs() < (free[p].1 - free[j].1).abs());
-            if better {
-                prev[j] = Some(i);
-            }
-        }
-    }
-    let mut taken = vec![false; n];
-    for start in 0..n {
-        if prev[start].is_some() || taken[start] {
-            continue;
-        }
-        let mut chain = vec![start];
-        let mut i = start;
-        while let Some(j) = next[i].filter(|&j| prev[j] == Some(i) && !taken[j]) {
-            chain.push(j);
-            i = j;
-        }
-        for &i in &chain {
-            taken[i] = true;
-        }
+    for chain in fragment_chains(&free) {
         let (s0, s1) = (free[chain[0]].0, free[chain[chain.len() - 1]].0);
         if chain.len() < FRAGMENT_LINE_MIN || s1 - s0 < FRAGMENT_LINE_MIN_LENGTH_M {
             continue;
@@ -1006,8 +963,77 @@ fn fragment_lines(
     lanes.classes.sort_unstable_by_key(|c| c.0);
 }
 
+/// The chains of free pieces `(mileage, offset, key)` sorted by mileage, best first: the
+/// path through the most pieces, each within `FRAGMENT_LINE_MAX_GAP_M` ahead of the one
+/// before and off the path's course (its offsets' running mean, the newest weighing a
+/// third) by at most `FRAGMENT_CHAIN_TOLERANCE_M` plus 0.5 % of the gap. It is found as a
+/// longest path in their directed acyclic graph; each step costs its share of the tolerance
+/// and of the longest gap, halved, so the straighter and shorter of two equally long paths
+/// wins. Its pieces removed, the next, while a path holds `FRAGMENT_LINE_MIN` pieces.
+/// A far line's fragments scatter a few decimetres about its axis, so a greedy choice of
+/// each piece's nearest next one (in offset and mileage) often skips the next along the
+/// line and splits it into chains too short to count (the far dashed line of the s2
+/// highway drive: five chains, none of eight pieces).
+fn fragment_chains(free: &[(f64, f64, usize)]) -> Vec<Vec<usize>> {
+    let n = free.len();
+    let tol = |gap: f64| FRAGMENT_CHAIN_TOLERANCE_M + 0.005 * gap;
+    let mut taken = vec![false; n];
+    let mut chains = Vec::new();
+    loop {
+        // score[j]: the best path ending at j; from[j] its previous piece.
+        let mut score = vec![f64::NEG_INFINITY; n];
+        let mut from: Vec<Option<usize>> = vec![None; n];
+        let mut count = vec![0usize; n];
+        // The path's course: its offsets' running mean (the last piece weighs a third).
+        let mut course = vec![0.0; n];
+        for j in (0..n).filter(|&j| !taken[j]) {
+            score[j] = 1.0;
+            count[j] = 1;
+            let (sj, oj, _) = free[j];
+            course[j] = oj;
+            for i in (0..j).rev().filter(|&i| !taken[i]) {
+                let gap = sj - free[i].0;
+                if gap > FRAGMENT_LINE_MAX_GAP_M {
+                    break;
+                }
+                let d = (oj - course[i]).abs();
+                if gap <= 0.3 || d > tol(gap) {
+                    continue;
+                }
+                let v = score[i] + 1.0 - 0.5 * (d / tol(gap) + gap / FRAGMENT_LINE_MAX_GAP_M);
+                if v > score[j] {
+                    score[j] = v;
+                    from[j] = Some(i);
+                    count[j] = count[i] + 1;
+                    course[j] = course[i] + (oj - course[i]) / 3.0;
+                }
+            }
+        }
+        let Some(end) = (0..n)
+            .filter(|&j| !taken[j])
+            .max_by(|&a, &b| score[a].total_cmp(&score[b]).then(b.cmp(&a)))
+        else {
+            break;
+        };
+        if count[end] < FRAGMENT_LINE_MIN {
+            break;
+        }
+        let mut chain = vec![end];
+        while let Some(i) = from[chain[chain.len() - 1]] {
+            chain.push(i);
+        }
+        chain.reverse();
+        for &i in &chain {
+            taken[i] = true;
+        }
+        chains.push(chain);
+    }
+    chains
+}
+
 /// The plan of a line of fragments: on the first of `designs` (the most lane-line length
-/// first) its pieces fit with at least half of them placed on painted dashes, over a line
+/// first) its pieces fit with at least `FRAGMENT_ON_DASH_SHARE` of them placed on painted
+/// dashes, over a line
 /// at least 5 periods long; no dashes are filled (where none was seen, a line of fragments
 /// does not know its course to a dash's width). `None` when no design fits.
 fn fragment_plan(spans: &[dashes::Span], designs: &[dashes::Design], length_m: f64) -> Option<dashes::Plan> {
@@ -1016,7 +1042,7 @@ fn fragment_plan(spans: &[dashes::Span], designs: &[dashes::Design], length_m: f
         .map(|d| dashes::plan_on_designs(spans, std::slice::from_ref(d), 0))
         .find(|p| {
             p.period > 0.0
-                && 2 * (p.extend.len() + p.absorb.len()) >= spans.len()
+                && (p.extend.len() + p.absorb.len()) as f64 >= FRAGMENT_ON_DASH_SHARE * spans.len() as f64
                 && length_m >= 5.0 * p.period
         })
 }
@@ -1067,6 +1093,11 @@ const FRAGMENT_DESIGN_MAX_WIDTH_M: f64 = 0.3;
 /// 0.5 % of their gap: a far fragment's middle is a few returns of one row, centimetres to
 /// a decimetre off the paint's axis.
 const FRAGMENT_CHAIN_TOLERANCE_M: f64 = 0.3;
+
+/// Share of a line of fragments' pieces its dash design must place on painted dashes:
+/// the pieces of a far dashed line nearly all fall on its dashes (86-100 % on the highway
+/// drives), a row of strays picked up along a verge on about as many as chance (70 %).
+const FRAGMENT_ON_DASH_SHARE: f64 = 0.8;
 
 /// Fragments a line of fragments alone needs, and its least length (m).
 const FRAGMENT_LINE_MIN: usize = 8;
@@ -2218,6 +2249,47 @@ mod tests {
     /// A row of fragments on the dash pattern that slants across the road (1.2 m over
     /// 240 m) beside a solid lane line that does not makes no lane line: lane lines run side
     /// by side. The far line parallel to it still does.
+    /// A far line's fragments scatter a few decimetres about its axis (one per dash here),
+    /// so a piece's nearest next one in offset is often not the next along it: the line is
+    /// the path through the most of them. A row of strays 1.3 m beside it (a verge's
+    /// returns), 12 of 16 on the dashes' phase, makes no line.
+    #[test]
+    fn a_far_line_of_scattered_fragments_is_one_line_and_strays_beside_it_none() {
+        let traj = crate::pipeline::types::test_straight_trajectory(300, -20.0);
+        let mut pieces = near_dashed_lines();
+        let jitter = [
+            0.0, -0.18, 0.1, -0.15, 0.14, -0.06, -0.2, 0.05, 0.1, -0.16, 0.15, -0.03, -0.14, 0.07, 0.12,
+            -0.18,
+        ];
+        let inside = [
+            0.2, 2.5, 5.0, 1.0, 4.2, 3.3, 0.6, 5.2, 2.0, 3.9, 1.5, 4.8, 0.9, 2.8, 5.3, 1.8,
+        ];
+        for (k, (&j, &at)) in jitter.iter().zip(&inside).enumerate() {
+            pieces.push(fragment(3.0 + 15.0 * k as f64 + at, 22.75 + j));
+        }
+        for k in 0..16 {
+            let at = if k % 4 < 3 {
+                0.5 + 0.7 * (k % 7) as f64
+            } else {
+                9.5
+            };
+            pieces.push(fragment(3.0 + 15.0 * k as f64 + at, 21.45 + 0.1 * (k % 3) as f64));
+        }
+        let (_, lines) = assemble(pieces, &traj, &Params::default(), None);
+        let far: Vec<&LaneLine> = lines
+            .iter()
+            .filter(|l| l.line.iter().all(|q| (q[1] - 22.75).abs() < 0.5))
+            .collect();
+        assert_eq!(far.len(), 1, "{far:?}");
+        assert!(far[0].length_m > 220.0, "{}", far[0].length_m);
+        assert!(
+            lines
+                .iter()
+                .all(|l| l.line.iter().all(|q| (q[1] - 21.45).abs() > 0.5)),
+            "no line along the strays"
+        );
+    }
+
     #[test]
     fn a_fragment_row_slanting_across_its_neighbour_makes_no_line() {
         let traj = crate::pipeline::types::test_straight_trajectory(300, -20.0);
