@@ -19,7 +19,11 @@
 //!    half of the stripes (worn ones are only ever narrower or shorter). Edges: the line
 //!    through two stripes' ends (over all pairs) that leaves no stripe end beyond it by more
 //!    than [`END_TOL_M`] and has the most ends on it, with a slope ≤ 1 (a crossing skewed
-//!    by at most 45°); a single-stripe maximum when no pair fits.
+//!    by at most 45°); a single-stripe maximum when no pair fits. The two edges run
+//!    parallel (the kerbs of the road crossed): when their slopes differ by more than
+//!    [`MAX_EDGE_SLOPE_DIFF`], the edge with fewer ends on it (worn paint left its ends on
+//!    a slant) takes the other's slope, through the end with the most ends near it and at
+//!    most a fifth beyond it.
 //! 3. Period `P` = median spacing of consecutive stripe centres divided by its whole
 //!    multiple of the smallest spacing; the grid is regular when every spacing is within
 //!    `max(0.15 m, 15 % P)` of a whole multiple.
@@ -45,6 +49,9 @@ use super::types::MarkingClass;
 pub const MAX_STRIPE_GAP_M: f64 = 3.0;
 /// Stripe ends may lie this far beyond a group edge (m).
 pub const END_TOL_M: f64 = 0.15;
+/// Most difference of slope (across the stripes per metre along the crossing) between a
+/// crossing's two edges.
+const MAX_EDGE_SLOPE_DIFF: f64 = 0.1;
 /// Most parallel misalignment of two stripes of one group (deg).
 const MAX_STRIPE_ANGLE_DEG: f64 = 10.0;
 /// Most stripe positions beyond the outermost seen stripe that fragments can extend a
@@ -113,7 +120,7 @@ pub(crate) fn frame_of(ring: &[[f64; 2]]) -> Frame {
 
 /// An edge line `e(c) = alpha + beta·c` over stripe ends `(c, end)`: `upper` edges bound the
 /// ends from above (hi ends), lower ones from below (lo ends, given negated).
-fn edge(ends: &[(f64, f64)]) -> (f64, f64) {
+fn edge(ends: &[(f64, f64)]) -> (f64, f64, usize) {
     let max_single = ends.iter().map(|e| e.1).fold(f64::NEG_INFINITY, f64::max);
     let mut best: (f64, f64) = (max_single, 0.0);
     let mut best_on = 1usize;
@@ -143,7 +150,26 @@ fn edge(ends: &[(f64, f64)]) -> (f64, f64) {
             }
         }
     }
-    best
+    (best.0, best.1, best_on)
+}
+
+/// The edge of slope `beta` over `ends` (see [`edge`]): through the end with the most
+/// ends within [`END_TOL_M`] of it, at most a fifth of them beyond it (a stray at a
+/// stripe's end); the farther of equals.
+fn edge_with_slope(ends: &[(f64, f64)], beta: f64) -> f64 {
+    let off: Vec<f64> = ends.iter().map(|&(c, e)| e - beta * c).collect();
+    let mut best = (0usize, f64::NEG_INFINITY);
+    for &a in &off {
+        let beyond = off.iter().filter(|&&o| o > a + END_TOL_M).count();
+        if 5 * beyond > off.len() {
+            continue;
+        }
+        let on = off.iter().filter(|&&o| (o - a).abs() <= END_TOL_M).count();
+        if on > best.0 || (on == best.0 && a > best.1) {
+            best = (on, a);
+        }
+    }
+    best.1
 }
 
 /// The regularisation plan over all marks of a drive (see the module docs). `fill_max` is
@@ -278,8 +304,20 @@ fn regularise_group(
     // Edges.
     let hi_ends: Vec<(f64, f64)> = seen.iter().map(|s| (s.c, s.hi)).collect();
     let lo_ends: Vec<(f64, f64)> = seen.iter().map(|s| (s.c, -s.lo)).collect();
-    let (ha, hb) = edge(&hi_ends);
-    let (la, lb) = edge(&lo_ends);
+    let (mut ha, mut hb, h_on) = edge(&hi_ends);
+    let (mut la, mut lb, l_on) = edge(&lo_ends);
+    // The two edges of a crossing run parallel (the kerbs of the road it crosses, skewed
+    // alike): when they do not, the edge with fewer stripe ends on it ran along worn ends
+    // and takes the other's slope.
+    if (hb + lb).abs() > MAX_EDGE_SLOPE_DIFF {
+        if h_on > l_on || (h_on == l_on && hb.abs() < lb.abs()) {
+            lb = -hb;
+            la = edge_with_slope(&lo_ends, lb);
+        } else {
+            hb = -lb;
+            ha = edge_with_slope(&hi_ends, hb);
+        }
+    }
     let hi_at = |c: f64| ha + hb * c;
     let lo_at = |c: f64| -(la + lb * c);
     if seen.iter().any(|s| hi_at(s.c) - lo_at(s.c) < 0.5) {
@@ -544,6 +582,24 @@ pub(crate) mod tests {
                 .all(|r| !r.2.contains(&103) && !r.2.contains(&104))
         );
         assert!(p.fill.is_empty(), "no empty position left");
+    }
+
+    /// Worn paint at one side of a crossing leaves its stripes' ends on a slant (stripe k
+    /// seen to 1.8 + 0.5·k m, five of them); the complete stripes end at 5 m like the
+    /// far edge of all. The slant holds the most ends, but the crossing's edges run
+    /// parallel: every stripe gets 5 m, none more (not even the one whose end a stray
+    /// lengthens to 5.8 m).
+    #[test]
+    fn an_edge_along_worn_ends_takes_the_other_edges_slope() {
+        let mut seen: Vec<(usize, f64, f64)> = (0..5).map(|k| (k, 0.0, 1.8 + 0.5 * k as f64)).collect();
+        // A stray at the end of one complete stripe does not move the edge.
+        seen.push((7, 0.0, 5.8));
+        let marks = zebra(&seen, &[]);
+        let p = plan(&marks, 1);
+        assert_eq!(p.reshape.len(), 8);
+        for (k, s, _) in &p.reshape {
+            assert!((s.length_m - 5.0).abs() < 0.05, "stripe {k}: {}", s.length_m);
+        }
     }
 
     #[test]
