@@ -799,8 +799,8 @@ fn dash_spans(l: &lanes::LaneResult, pieces: &[Piece]) -> Vec<dashes::Span> {
 /// Lane lines of line fragments alone (written here: the lane-line growth extrapolates each
 /// piece's direction, which a few returns of one scan row do not fix). The fragments and
 /// the dashes on no lane line and not within `FRAGMENT_EXCLUSION_M` of one are chained in
-/// the trajectory frame (see [`fragment_chains`]). A chain of at least `FRAGMENT_LINE_MIN` pieces
-/// over at least `FRAGMENT_LINE_MIN_LENGTH_M` becomes a lane line: its pieces' offsets
+/// the trajectory frame (see [`fragment_chains`]: at least `FRAGMENT_LINE_MIN` pieces). A
+/// chain over at least `FRAGMENT_LINE_MIN_LENGTH_M` becomes a lane line: its pieces' offsets
 /// smoothed over `FRAGMENT_LINE_SMOOTHING_M`, refitted without pieces off it by more than
 /// `FRAGMENT_TOLERANCE_M`, and dropped if it drifts across the road by more than
 /// `FRAGMENT_PARALLEL_M` relative to the lane line beside it (whose drift is its
@@ -809,9 +809,9 @@ fn dash_spans(l: &lanes::LaneResult, pieces: &[Piece]) -> Vec<dashes::Span> {
 /// a lane-line dash design of the drive's other dashed lines (dashes at most
 /// `FRAGMENT_DESIGN_MAX_WIDTH_M` wide, the design of the most lane-line length tried
 /// first; see [`dashes::plan_on_designs`]), at least `FRAGMENT_ON_DASH_SHARE` of them
-/// are placed on painted dashes and the line spans at least 5 periods. A far lane's dashes seen as one scan row
-/// each make such a line; scattered bright returns (a verge, sealant) and a far solid
-/// line's fragments fall on no phase and make none.
+/// are placed on painted dashes and the line spans at least 5 periods. A far lane's dashes
+/// seen as one scan row each make such a line; scattered bright returns (a verge, sealant)
+/// and a far solid line's fragments fall on no phase and make none.
 fn fragment_lines(
     lanes: &mut lanes::Lanes,
     pieces: &mut [Piece],
@@ -864,7 +864,7 @@ fn fragment_lines(
     free.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.2.cmp(&b.2)));
     for chain in fragment_chains(&free) {
         let (s0, s1) = (free[chain[0]].0, free[chain[chain.len() - 1]].0);
-        if chain.len() < FRAGMENT_LINE_MIN || s1 - s0 < FRAGMENT_LINE_MIN_LENGTH_M {
+        if s1 - s0 < FRAGMENT_LINE_MIN_LENGTH_M {
             continue;
         }
         // The line: the members' centreline vertices smoothed over FRAGMENT_LINE_SMOOTHING_M,
@@ -973,7 +973,8 @@ fn fragment_lines(
 /// A far line's fragments scatter a few decimetres about its axis, so a greedy choice of
 /// each piece's nearest next one (in offset and mileage) often skips the next along the
 /// line and splits it into chains too short to count (the far dashed line of the s2
-/// highway drive: five chains, none of eight pieces).
+/// highway drive: five chains, none of eight pieces). Cost: O(w) per piece and path, for
+/// the w pieces within the longest gap behind it (a drive's free pieces are a few hundred).
 fn fragment_chains(free: &[(f64, f64, usize)]) -> Vec<Vec<usize>> {
     let n = free.len();
     let tol = |gap: f64| FRAGMENT_CHAIN_TOLERANCE_M + 0.005 * gap;
@@ -983,12 +984,10 @@ fn fragment_chains(free: &[(f64, f64, usize)]) -> Vec<Vec<usize>> {
         // score[j]: the best path ending at j; from[j] its previous piece.
         let mut score = vec![f64::NEG_INFINITY; n];
         let mut from: Vec<Option<usize>> = vec![None; n];
-        let mut count = vec![0usize; n];
         // The path's course: its offsets' running mean (the last piece weighs a third).
         let mut course = vec![0.0; n];
         for j in (0..n).filter(|&j| !taken[j]) {
             score[j] = 1.0;
-            count[j] = 1;
             let (sj, oj, _) = free[j];
             course[j] = oj;
             for i in (0..j).rev().filter(|&i| !taken[i]) {
@@ -1004,7 +1003,6 @@ fn fragment_chains(free: &[(f64, f64, usize)]) -> Vec<Vec<usize>> {
                 if v > score[j] {
                     score[j] = v;
                     from[j] = Some(i);
-                    count[j] = count[i] + 1;
                     course[j] = course[i] + (oj - course[i]) / 3.0;
                 }
             }
@@ -1015,12 +1013,12 @@ fn fragment_chains(free: &[(f64, f64, usize)]) -> Vec<Vec<usize>> {
         else {
             break;
         };
-        if count[end] < FRAGMENT_LINE_MIN {
-            break;
-        }
         let mut chain = vec![end];
         while let Some(i) = from[chain[chain.len() - 1]] {
             chain.push(i);
+        }
+        if chain.len() < FRAGMENT_LINE_MIN {
+            break;
         }
         chain.reverse();
         for &i in &chain {
@@ -1033,9 +1031,9 @@ fn fragment_chains(free: &[(f64, f64, usize)]) -> Vec<Vec<usize>> {
 
 /// The plan of a line of fragments: on the first of `designs` (the most lane-line length
 /// first) its pieces fit with at least `FRAGMENT_ON_DASH_SHARE` of them placed on painted
-/// dashes, over a line
-/// at least 5 periods long; no dashes are filled (where none was seen, a line of fragments
-/// does not know its course to a dash's width). `None` when no design fits.
+/// dashes, over a line at least 5 periods long; no dashes are filled (where none was seen,
+/// a line of fragments does not know its course to a dash's width). `None` when no design
+/// fits.
 fn fragment_plan(spans: &[dashes::Span], designs: &[dashes::Design], length_m: f64) -> Option<dashes::Plan> {
     designs
         .iter()
@@ -2246,9 +2244,6 @@ mod tests {
         );
     }
 
-    /// A row of fragments on the dash pattern that slants across the road (1.2 m over
-    /// 240 m) beside a solid lane line that does not makes no lane line: lane lines run side
-    /// by side. The far line parallel to it still does.
     /// A far line's fragments scatter a few decimetres about its axis (one per dash here),
     /// so a piece's nearest next one in offset is often not the next along it: the line is
     /// the path through the most of them. A row of strays 1.3 m beside it (a verge's
@@ -2290,6 +2285,9 @@ mod tests {
         );
     }
 
+    /// A row of fragments on the dash pattern that slants across the road (1.2 m over
+    /// 240 m) beside a solid lane line that does not makes no lane line: lane lines run side
+    /// by side. The far line parallel to it still does.
     #[test]
     fn a_fragment_row_slanting_across_its_neighbour_makes_no_line() {
         let traj = crate::pipeline::types::test_straight_trajectory(300, -20.0);
