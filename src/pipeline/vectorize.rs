@@ -37,7 +37,9 @@
 //! lane lines bridged (short
 //! ones always, long ones between longer pieces, and up to `lane_lines.max_unseen_gap_m`
 //! where the scanner saw no bare asphalt on the gap's course); dashes put on their line's design
-//! (`dashes`); `unknown` markings that are not clearly paint (median contrast over the
+//! (`dashes`); solid lane lines that end where the scanner stopped seeing their course run
+//! on to the stop line or crossing ahead (`extend_to_bars`: cars queued beside the survey
+//! vehicle at a junction hide the lines' last metres); `unknown` markings that are not clearly paint (median contrast over the
 //! asphalt below `unknown_min_contrast`) dropped, and guideline stripes with no other
 //! within 3 m (hatching comes in groups; a lone stripe is a streak); ids in driving order.
 //!
@@ -1665,6 +1667,16 @@ pub fn assemble(
         Default::default()
     };
     pieces.extend(added);
+    if let Some(seen) = seen {
+        let runs = extend_to_bars(
+            &mut lanes.lines,
+            &pieces,
+            &refl,
+            seen,
+            params.lane_lines.max_gap_m,
+        );
+        pieces.extend(runs);
+    }
     // A fragment not placed on a painted dash (`regularise_dashes` clears the flag of those
     // it places) is dropped: off the lane lines it is noise, on one it says where the line
     // runs, not where its paint is. So is a part of a painted dash another piece stands
@@ -1736,6 +1748,173 @@ pub fn assemble(
         })
         .collect();
     (markings, lane_lines)
+}
+
+/// The bars across the road, in the trajectory frame [s0, s1, o0, o1]: stop lines lying
+/// across it, and crossings (the union of the boxes of crosswalk stripes that overlap
+/// along the road).
+fn bars_across(pieces: &[Piece], refl: &RefLine) -> Vec<[f64; 4]> {
+    let mut bars: Vec<[f64; 4]> = pieces.iter().filter_map(|p| stop_line_across(p, refl)).collect();
+    // Stripes along the road (a crossing of it; those across it cross a side street).
+    let mut stripes: Vec<[f64; 4]> = pieces
+        .iter()
+        .filter(|p| p.marking.class == MarkingClass::Crosswalk && p.marking.outline.len() >= 3)
+        .map(|p| so_box(&p.marking.outline, refl))
+        .filter(|b| b[1] - b[0] >= 2.0 * (b[3] - b[2]))
+        .collect();
+    stripes.sort_by(|a, b| a[0].total_cmp(&b[0]));
+    bars.retain(|b| b[3] - b[2] >= BAR_MIN_ACROSS_M);
+    let mut crossing: Option<[f64; 4]> = None;
+    for b in stripes {
+        crossing = match crossing {
+            Some(c) if b[0] <= c[1] => Some([c[0], c[1].max(b[1]), c[2].min(b[2]), c[3].max(b[3])]),
+            Some(c) => {
+                bars.push(c);
+                Some(b)
+            }
+            None => Some(b),
+        };
+    }
+    bars.extend(crossing);
+    bars.retain(|b| b[3] - b[2] >= BAR_MIN_ACROSS_M);
+    bars
+}
+
+/// Shortest extent across the road (m) of a bar a lane line may run on to.
+const BAR_MIN_ACROSS_M: f64 = 2.0;
+/// How far beside a bar's seen extent across the road (m) a lane line may meet it: a car
+/// beside the survey vehicle hides the bar's other end as well as the line's last metres.
+const BAR_REACH_M: f64 = 10.0;
+/// Length (m) over which a lane line's end direction is taken.
+const END_FIT_M: f64 = 10.0;
+/// Largest end slope (offset per mileage) of a lane line carried on: one that bends away
+/// (a ramp's line leaving the road) is not.
+const END_MAX_SLOPE: f64 = 0.03;
+/// Confidence of a lane line's extension and of the solid piece along it.
+const EXTENSION_CONFIDENCE: f64 = 0.3;
+
+/// Lane lines that end where the scanner stopped seeing their course run on to the bar
+/// across the road ahead (a stop line, a crossing) at most `max_m` beyond their end: a
+/// queue of cars beside the survey vehicle at a junction hides the last metres of the lines
+/// (and of the bar), and a lane line runs to the bar. A line is carried on along its end
+/// direction (fitted over [`END_FIT_M`], slope at most [`END_MAX_SLOPE`]) to the nearest bar
+/// ahead whose extent across the road, widened by [`BAR_REACH_M`], holds that course, when
+/// no bare asphalt was seen on the course (`Gap::Unseen`: bare asphalt there means the line
+/// really ends). Both ends of a line are tried. Returns the solid pieces along the
+/// extensions of solid lines (no points seen, confidence [`EXTENSION_CONFIDENCE`]).
+fn extend_to_bars(
+    lines: &mut [lanes::LaneResult],
+    pieces: &[Piece],
+    refl: &RefLine,
+    seen: &Lookup<'_>,
+    max_m: f64,
+) -> Vec<Piece> {
+    let bars = bars_across(pieces, refl);
+    let mut out = Vec::new();
+    if bars.is_empty() {
+        return out;
+    }
+    for l in lines.iter_mut().filter(|l| l.class == LaneLineClass::SolidLine) {
+        let mut so: Vec<[f64; 2]> = l.line.iter().map(|&q| refl.locate(q)).collect();
+        if so.len() < 2 {
+            continue;
+        }
+        let forward = so[so.len() - 1][0] >= so[0][0];
+        if !forward {
+            so.reverse();
+        }
+        let width = {
+            let mut w: Vec<f64> = l.pieces.iter().map(|&k| pieces[k].marking.width_m).collect();
+            if w.is_empty() {
+                continue;
+            }
+            geom::median(&mut w)
+        };
+        let mut added: [Vec<[f64; 2]>; 2] = [Vec::new(), Vec::new()];
+        for (end, dir) in [(so.len() - 1, 1.0), (0, -1.0)] {
+            let (s_e, o_e) = (so[end][0], so[end][1]);
+            let near: Vec<[f64; 2]> = so
+                .iter()
+                .copied()
+                .filter(|q| (q[0] - s_e).abs() <= END_FIT_M)
+                .collect();
+            let slope = geom::ls_slope(&near).unwrap_or(0.0);
+            if slope.abs() > END_MAX_SLOPE {
+                continue;
+            }
+            let course_at = |s: f64| o_e + slope * (s - s_e);
+            // The nearest bar ahead that the course meets.
+            let hit = bars
+                .iter()
+                .filter_map(|b| {
+                    let s_b = if dir > 0.0 { b[0] } else { b[1] };
+                    let d = dir * (s_b - s_e);
+                    let o = course_at(s_b);
+                    (d > 0.5 && d <= max_m && o >= b[2] - BAR_REACH_M && o <= b[3] + BAR_REACH_M)
+                        .then_some((d, s_b))
+                })
+                .min_by(|a, b| a.0.total_cmp(&b.0));
+            let Some((d, s_b)) = hit else { continue };
+            let n = d.ceil() as usize;
+            let course: Vec<[f64; 2]> = (0..=n)
+                .map(|k| {
+                    let s = s_e + (s_b - s_e) * k as f64 / n as f64;
+                    refl.point(s, course_at(s))
+                })
+                .collect();
+            if seen.gap(&course, 0.05) != Gap::Unseen {
+                continue;
+            }
+            // In mileage order.
+            let mut run = course;
+            if dir < 0.0 {
+                run.reverse();
+            }
+            let ring = outline::buffered_line_simple(&run, width / 2.0);
+            if ring.len() >= 3 {
+                out.push(Piece {
+                    marking: Marking {
+                        id: String::new(),
+                        class: MarkingClass::SolidLine,
+                        outline: ring,
+                        confidence: EXTENSION_CONFIDENCE,
+                        length_m: d,
+                        width_m: width,
+                        heading_deg: heading_deg([run[n][0] - run[0][0], run[n][1] - run[0][1]]),
+                        point_count: 0,
+                    },
+                    centerline: Some(run.clone()),
+                    undersampled: None,
+                    fragment: false,
+                    contrast: None,
+                });
+            }
+            // Without the line's own end vertex.
+            added[usize::from(dir > 0.0)] = if dir > 0.0 {
+                run[1..].to_vec()
+            } else {
+                run[..n].to_vec()
+            };
+        }
+        if added[0].is_empty() && added[1].is_empty() {
+            continue;
+        }
+        // The line in mileage order, extended at both ends, back in its own order.
+        let mut body = l.line.clone();
+        if !forward {
+            body.reverse();
+        }
+        let mut line = std::mem::take(&mut added[0]);
+        line.extend(body);
+        line.extend(added[1].iter().copied());
+        if !forward {
+            line.reverse();
+        }
+        l.length_m = geom::polyline_length(&line);
+        l.line = line;
+        l.confidence = l.confidence.min(l.confidence * 0.5 + EXTENSION_CONFIDENCE * 0.5);
+    }
+    out
 }
 
 /// Outlines, lane lines and ids for one cloud (the whole drive in one chunk).
@@ -2169,6 +2348,53 @@ mod tests {
         let bare = crate::pipeline::observed::test_seen_except(&traj, 3.5, |_| false);
         let (marks, lines) = assemble(pieces(), &traj, &p, Some(&bare.lookup()));
         assert_eq!((marks.len(), lines.len()), (2, 2));
+    }
+
+    /// A solid lane line whose last 20 m before a crossing the scanner did not see runs on
+    /// to the crossing (with a solid piece along the extension), even though the crossing's
+    /// stripes were seen only on the other half of the road; where bare asphalt was seen
+    /// on that course the line ends where its paint does.
+    #[test]
+    fn a_solid_line_runs_on_through_what_was_not_seen_to_the_crossing_ahead() {
+        let traj = crate::pipeline::types::test_straight_trajectory(100, -20.0);
+        let pieces = || {
+            let mut v = vec![shifted(solid(0.0, 30.0), 3.5)];
+            v.extend((0..5).map(|k| {
+                rect(
+                    MarkingClass::Crosswalk,
+                    50.0,
+                    55.0,
+                    -3.0 + k as f64,
+                    -2.55 + k as f64,
+                )
+            }));
+            v
+        };
+        let p = Params::default();
+        let unseen = crate::pipeline::observed::test_seen_except(&traj, 3.5, |x| (30.0..50.0).contains(&x));
+        let (marks, lines) = assemble(pieces(), &traj, &p, Some(&unseen.lookup()));
+        assert_eq!(lines.len(), 1);
+        let end = lines[0]
+            .line
+            .iter()
+            .map(|q| q[0])
+            .fold(f64::NEG_INFINITY, f64::max);
+        assert!((end - 50.0).abs() < 0.1, "line ends at {end}");
+        let run = marks
+            .iter()
+            .find(|m| m.point_count == 0)
+            .expect("a solid piece along the extension");
+        assert_eq!(run.class, MarkingClass::SolidLine);
+        assert!((run.length_m - 20.0).abs() < 0.1, "{}", run.length_m);
+        let bare = crate::pipeline::observed::test_seen_except(&traj, 3.5, |_| false);
+        let (marks, lines) = assemble(pieces(), &traj, &p, Some(&bare.lookup()));
+        let end = lines[0]
+            .line
+            .iter()
+            .map(|q| q[0])
+            .fold(f64::NEG_INFINITY, f64::max);
+        assert!((end - 30.0).abs() < 0.1, "line ends at {end}");
+        assert!(marks.iter().all(|m| m.point_count > 0));
     }
 
     /// A line fragment: a thin 0.6 m piece from `x0` at offset `y`.
