@@ -442,6 +442,18 @@ impl Runner for GateRunner {
     }
 }
 
+/// Poll `done` every 5 ms; panics naming `what` after 30 s.
+async fn wait_until(what: &str, done: impl Fn() -> bool) {
+    let deadline = std::time::Instant::now() + Duration::from_secs(30);
+    while !done() {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "timed out waiting for {what}"
+        );
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+}
+
 /// Fails with a transient I/O error the first `failures` times, then succeeds.
 struct FlakyRunner {
     failures: usize,
@@ -1300,6 +1312,13 @@ async fn a_crashed_worker_s_job_completes_exactly_once_after_restart() {
     let (p, t) = upload_pair(&first, "tile.las").await;
     let id = first.job_ok(json!({"points": [p], "trajectory": t})).await;
     first.wait_status(&id, "running").await;
+    // The job is marked running when it is claimed, a moment before its pipeline starts:
+    // crash only once the pipeline runs (killed before, it never starts, and never returns
+    // below).
+    wait_until("the crashed worker's pipeline to start", || {
+        stuck.started.load(Ordering::SeqCst) > 0
+    })
+    .await;
     let (dir, clock, lease_ms) = (
         first.dir.clone(),
         first.clock.clone(),
@@ -1348,9 +1367,10 @@ async fn a_crashed_worker_s_job_completes_exactly_once_after_restart() {
 
     // The crashed process's pipeline finally returns: its answer has nowhere to go.
     stuck.release();
-    while stuck.returned.load(Ordering::SeqCst) == 0 {
-        tokio::time::sleep(Duration::from_millis(5)).await;
-    }
+    wait_until("the crashed worker's pipeline to return", || {
+        stuck.returned.load(Ordering::SeqCst) > 0
+    })
+    .await;
     tokio::time::sleep(Duration::from_millis(100)).await;
     assert_eq!(second.files_in("results").len(), 1);
     assert_eq!(second.job(&id).await["attempts"], 2);
