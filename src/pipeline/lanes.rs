@@ -66,7 +66,8 @@
 //!    the line follows the road's curvature through occlusions. Sampled every `vertex_spacing_m`, mapped back through
 //!    the reference frame and simplified (Douglas–Peucker, `simplify_tolerance_m`).
 //! 5. Lane lines shorter than `min_length_m` or whose pieces cover less than
-//!    `min_paint_share` of their length, and single named pieces that are not solid, are
+//!    `min_paint_share` of their length, single named pieces that are not solid, and
+//!    solid lines of at most 3 named pieces with less paint than `scant_solid_paint_m` are
 //!    dropped: isolated dashes or noise do not make lane lines.
 //!
 //! Confidence: the mean piece confidence × support (pieces and painted length) × fit
@@ -116,6 +117,11 @@ pub struct Params {
     /// line paints 25–40 % (MUTCD 3/9 m, GB 2/4 m, 6/9 m) and keeps a tenth through
     /// occlusions; two stray fragments 30 m apart do not make a lane line.
     pub min_paint_share: f64,
+    /// Least paint (m) of a solid lane line of at most [`SCANT_SOLID_MAX_PIECES`] named
+    /// pieces. Default 4: two or three 1 m pieces of 14–17 returns each, 15 m apart, are
+    /// no solid line (on the highway drives such lines ran beside or across the far lines,
+    /// correctness .10–.71, each a second piece of the line it touched).
+    pub scant_solid_paint_m: f64,
     /// Painted runs up to this long count as dashes (m). Default 10.
     pub dash_max_run_m: f64,
     /// Fewest dashes that make a dashed lane line (or dashed stretch). Default 3.
@@ -145,6 +151,7 @@ impl Default for Params {
             min_width_similarity: 0.5,
             min_length_m: 15.0,
             min_paint_share: 0.1,
+            scant_solid_paint_m: 4.0,
             dash_max_run_m: 10.0,
             min_dashes: 3,
             run_join_gap_m: 1.0,
@@ -168,6 +175,7 @@ impl Params {
             ("min_width_similarity", self.min_width_similarity, 0.0, 1.0),
             ("min_length_m", self.min_length_m, 0.0, 1000.0),
             ("min_paint_share", self.min_paint_share, 0.0, 1.0),
+            ("scant_solid_paint_m", self.scant_solid_paint_m, 0.0, 100.0),
             ("dash_max_run_m", self.dash_max_run_m, 0.1, 100.0),
             ("run_join_gap_m", self.run_join_gap_m, 0.0, 10.0),
             ("smoothing_m", self.smoothing_m, 0.1, 50.0),
@@ -255,6 +263,10 @@ struct Seg {
     /// Along-track length its members cover (m; overlaps counted twice).
     painted: f64,
 }
+
+/// A solid lane line of at most this many named pieces needs `scant_solid_paint_m` of
+/// paint (see [`Params`]).
+pub const SCANT_SOLID_MAX_PIECES: usize = 3;
 
 /// Lateral uncertainty (m) of a piece's end over the length its slope is fitted on: the
 /// direction of a piece L metres long is known to about atan(SLOPE_NOISE_M / L) (3° for a
@@ -579,7 +591,10 @@ pub fn grow_with_barriers(
                 .iter()
                 .map(|&m| items[m].so[items[m].so.len() - 1][0] - items[m].so[0][0])
                 .sum();
-            if painted < p.min_paint_share * (s1 - s0) {
+            let scant_solid = class == LaneLineClass::SolidLine
+                && named <= SCANT_SOLID_MAX_PIECES
+                && painted < p.scant_solid_paint_m;
+            if painted < p.min_paint_share * (s1 - s0) || scant_solid {
                 continue;
             }
             let (line, rms) = centreline(&items, &members, &refl, p, class == LaneLineClass::DashedLine);
@@ -1239,6 +1254,27 @@ mod tests {
         }
     }
 
+    /// Two 1 m solid pieces 16 m apart make no lane line (2 m of paint); three pieces of
+    /// irregular length and spacing (3, 1 and 0.5 m: no dashes) over the same 17 m do
+    /// (4.5 m).
+    #[test]
+    fn a_solid_line_of_few_pieces_needs_four_metres_of_paint() {
+        let p = Params::default();
+        let two = vec![
+            piece(0, 0.0, 1.0, MarkingClass::SolidLine),
+            piece(1, 16.0, 17.0, MarkingClass::SolidLine),
+        ];
+        assert!(grow(&two, &traj(), &p).lines.is_empty());
+        let three = vec![
+            piece(0, 0.0, 3.0, MarkingClass::SolidLine),
+            piece(1, 5.0, 6.0, MarkingClass::SolidLine),
+            piece(2, 16.5, 17.0, MarkingClass::SolidLine),
+        ];
+        let lanes = grow(&three, &traj(), &p);
+        assert_eq!(lanes.lines.len(), 1, "{:?}", lanes.lines);
+        assert_eq!(lanes.lines[0].class, LaneLineClass::SolidLine);
+    }
+
     /// `unknown` fragments (1 m every 6 m, the period of a dashed line) between two stretches
     /// of a solid line join it without making it dashed there: one solid lane line, the
     /// fragments made `solid_line`. Named dashes so placed make a dashed stretch, and
@@ -1361,7 +1397,8 @@ mod tests {
     }
 
     /// Two 1 m solid fragments 30 m apart cover 6 % of the line they would span: no lane
-    /// line (unless `min_paint_share` is 0); a 2/4 m dashed line (33 % painted) is one.
+    /// line (unless `min_paint_share` and `scant_solid_paint_m` are 0); a 2/4 m dashed
+    /// line (33 % painted) is one.
     #[test]
     fn stray_fragments_make_no_lane_line_and_dashes_do() {
         let t = traj();
@@ -1373,6 +1410,7 @@ mod tests {
         assert!(grow(&stray, &t, &p).lines.is_empty());
         let lenient = Params {
             min_paint_share: 0.0,
+            scant_solid_paint_m: 0.0,
             ..Params::default()
         };
         assert_eq!(grow(&stray, &t, &lenient).lines.len(), 1);
@@ -1415,6 +1453,7 @@ mod tests {
         let lenient = Params {
             min_paint_share: 0.0,
             min_length_m: 0.0,
+            scant_solid_paint_m: 0.0,
             ..Params::default()
         };
         let apart = [frag(0, 0.0, 1.0), frag(1, 13.0, -1.0)];
