@@ -118,9 +118,10 @@ pub struct Params {
     /// occlusions; two stray fragments 30 m apart do not make a lane line.
     pub min_paint_share: f64,
     /// Least paint (m) of a solid lane line of at most [`SCANT_SOLID_MAX_PIECES`] named
-    /// pieces. Default 4: two or three 1 m pieces of 14–17 returns each, 15 m apart, are
-    /// no solid line (on the highway drives such lines ran beside or across the far lines,
-    /// correctness .10–.71, each a second piece of the line it touched).
+    /// pieces. Default 8, about one solid piece's worth (the rules' solid piece is at least
+    /// 7 m): two or three 1 m pieces of 14–17 returns each, 15 m apart, are no solid line
+    /// (on the highway drives such lines ran beside or across the far lines, correctness
+    /// .10–.71, each a second piece of the line it touched). 4 m kept a few of them.
     pub scant_solid_paint_m: f64,
     /// Painted runs up to this long count as dashes (m). Default 10.
     pub dash_max_run_m: f64,
@@ -151,7 +152,7 @@ impl Default for Params {
             min_width_similarity: 0.5,
             min_length_m: 15.0,
             min_paint_share: 0.1,
-            scant_solid_paint_m: 4.0,
+            scant_solid_paint_m: 8.0,
             dash_max_run_m: 10.0,
             min_dashes: 3,
             run_join_gap_m: 1.0,
@@ -1255,10 +1256,10 @@ mod tests {
     }
 
     /// Two 1 m solid pieces 16 m apart make no lane line (2 m of paint); three pieces of
-    /// irregular length and spacing (3, 1 and 0.5 m: no dashes) over the same 17 m do
-    /// (4.5 m).
+    /// irregular length and spacing (6, 1 and 2.5 m: no dashes) over the same 17 m do
+    /// (9.5 m).
     #[test]
-    fn a_solid_line_of_few_pieces_needs_four_metres_of_paint() {
+    fn a_solid_line_of_few_pieces_needs_eight_metres_of_paint() {
         let p = Params::default();
         let two = vec![
             piece(0, 0.0, 1.0, MarkingClass::SolidLine),
@@ -1266,9 +1267,9 @@ mod tests {
         ];
         assert!(grow(&two, &traj(), &p).lines.is_empty());
         let three = vec![
-            piece(0, 0.0, 3.0, MarkingClass::SolidLine),
-            piece(1, 5.0, 6.0, MarkingClass::SolidLine),
-            piece(2, 16.5, 17.0, MarkingClass::SolidLine),
+            piece(0, 0.0, 6.0, MarkingClass::SolidLine),
+            piece(1, 7.0, 8.0, MarkingClass::SolidLine),
+            piece(2, 14.5, 17.0, MarkingClass::SolidLine),
         ];
         let lanes = grow(&three, &traj(), &p);
         assert_eq!(lanes.lines.len(), 1, "{:?}", lanes.lines);
