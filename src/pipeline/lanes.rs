@@ -214,6 +214,7 @@ pub struct LanePiece {
 #[derive(Clone, Debug, PartialEq)]
 pub struct LaneResult {
     pub class: LaneLineClass,
+    /// Centreline, vertices in increasing mileage (driving order).
     pub line: Vec<[f64; 2]>,
     pub confidence: f64,
     pub length_m: f64,

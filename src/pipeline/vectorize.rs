@@ -621,6 +621,12 @@ fn bridge(a: &Piece, b: &Piece, lane: &[[f64; 2]], max_gap: f64) -> Option<Piece
     }
     line.push(if sa <= sb { pb } else { pa });
     let width = 0.5 * (a.marking.width_m + b.marking.width_m);
+    unseen_solid(line, width, 0.5 * a.marking.confidence.min(b.marking.confidence))
+}
+
+/// A solid piece where no paint was seen (point count 0): the centreline `line` (driving
+/// order) buffered by half `width`. `None` when the line is degenerate.
+fn unseen_solid(line: Vec<[f64; 2]>, width: f64, confidence: f64) -> Option<Piece> {
     let ring = outline::buffered_line_simple(&line, width / 2.0);
     if ring.len() < 3 {
         return None;
@@ -634,7 +640,7 @@ fn bridge(a: &Piece, b: &Piece, lane: &[[f64; 2]], max_gap: f64) -> Option<Piece
             id: String::new(),
             class: MarkingClass::SolidLine,
             outline: ring,
-            confidence: 0.5 * a.marking.confidence.min(b.marking.confidence),
+            confidence,
             length_m: geom::polyline_length(&line),
             width_m: width,
             heading_deg: heading_deg(chord),
@@ -1763,7 +1769,6 @@ fn bars_across(pieces: &[Piece], refl: &RefLine) -> Vec<[f64; 4]> {
         .filter(|b| b[1] - b[0] >= 2.0 * (b[3] - b[2]))
         .collect();
     stripes.sort_by(|a, b| a[0].total_cmp(&b[0]));
-    bars.retain(|b| b[3] - b[2] >= BAR_MIN_ACROSS_M);
     let mut crossing: Option<[f64; 4]> = None;
     for b in stripes {
         crossing = match crossing {
@@ -1815,13 +1820,10 @@ fn extend_to_bars(
         return out;
     }
     for l in lines.iter_mut().filter(|l| l.class == LaneLineClass::SolidLine) {
-        let mut so: Vec<[f64; 2]> = l.line.iter().map(|&q| refl.locate(q)).collect();
+        // The line's vertices run in increasing mileage (see `lanes::LaneResult::line`).
+        let so: Vec<[f64; 2]> = l.line.iter().map(|&q| refl.locate(q)).collect();
         if so.len() < 2 {
             continue;
-        }
-        let forward = so[so.len() - 1][0] >= so[0][0];
-        if !forward {
-            so.reverse();
         }
         let width = {
             let mut w: Vec<f64> = l.pieces.iter().map(|&k| pieces[k].marking.width_m).collect();
@@ -1830,7 +1832,9 @@ fn extend_to_bars(
             }
             geom::median(&mut w)
         };
-        let mut added: [Vec<[f64; 2]>; 2] = [Vec::new(), Vec::new()];
+        // The extensions before the first vertex and after the last, in mileage order and
+        // without the line's own end vertex.
+        let (mut before, mut after) = (Vec::new(), Vec::new());
         for (end, dir) in [(so.len() - 1, 1.0), (0, -1.0)] {
             let (s_e, o_e) = (so[end][0], so[end][1]);
             let near: Vec<[f64; 2]> = so
@@ -1855,63 +1859,32 @@ fn extend_to_bars(
                 })
                 .min_by(|a, b| a.0.total_cmp(&b.0));
             let Some((d, s_b)) = hit else { continue };
+            // From the bar's side or the line's end, whichever comes first along the road.
+            let (from, to) = if dir > 0.0 { (s_e, s_b) } else { (s_b, s_e) };
             let n = d.ceil() as usize;
-            let course: Vec<[f64; 2]> = (0..=n)
+            let run: Vec<[f64; 2]> = (0..=n)
                 .map(|k| {
-                    let s = s_e + (s_b - s_e) * k as f64 / n as f64;
+                    let s = from + (to - from) * k as f64 / n as f64;
                     refl.point(s, course_at(s))
                 })
                 .collect();
-            if seen.gap(&course, 0.05) != Gap::Unseen {
+            if seen.gap(&run, 0.05) != Gap::Unseen {
                 continue;
             }
-            // In mileage order.
-            let mut run = course;
-            if dir < 0.0 {
-                run.reverse();
-            }
-            let ring = outline::buffered_line_simple(&run, width / 2.0);
-            if ring.len() >= 3 {
-                out.push(Piece {
-                    marking: Marking {
-                        id: String::new(),
-                        class: MarkingClass::SolidLine,
-                        outline: ring,
-                        confidence: EXTENSION_CONFIDENCE,
-                        length_m: d,
-                        width_m: width,
-                        heading_deg: heading_deg([run[n][0] - run[0][0], run[n][1] - run[0][1]]),
-                        point_count: 0,
-                    },
-                    centerline: Some(run.clone()),
-                    undersampled: None,
-                    fragment: false,
-                    contrast: None,
-                });
-            }
-            // Without the line's own end vertex.
-            added[usize::from(dir > 0.0)] = if dir > 0.0 {
-                run[1..].to_vec()
+            if dir > 0.0 {
+                after = run[1..].to_vec();
             } else {
-                run[..n].to_vec()
-            };
+                before = run[..n].to_vec();
+            }
+            out.extend(unseen_solid(run, width, EXTENSION_CONFIDENCE));
         }
-        if added[0].is_empty() && added[1].is_empty() {
+        if before.is_empty() && after.is_empty() {
             continue;
         }
-        // The line in mileage order, extended at both ends, back in its own order.
-        let mut body = l.line.clone();
-        if !forward {
-            body.reverse();
-        }
-        let mut line = std::mem::take(&mut added[0]);
-        line.extend(body);
-        line.extend(added[1].iter().copied());
-        if !forward {
-            line.reverse();
-        }
-        l.length_m = geom::polyline_length(&line);
-        l.line = line;
+        before.append(&mut l.line);
+        before.append(&mut after);
+        l.length_m = geom::polyline_length(&before);
+        l.line = before;
         l.confidence = l.confidence.min(l.confidence * 0.5 + EXTENSION_CONFIDENCE * 0.5);
     }
     out
