@@ -65,7 +65,8 @@
 //!    slopes, fitted over a quarter of the gap, 2–10 m, never less than the bandwidth), so
 //!    the line follows the road's curvature through occlusions. Sampled every `vertex_spacing_m`, mapped back through
 //!    the reference frame and simplified (Douglas–Peucker, `simplify_tolerance_m`).
-//! 5. Lane lines shorter than `min_length_m` or whose pieces cover less than
+//! 5. Lane lines shorter than `min_length_m` (a dashed stretch split off a chain at least
+//!    that long is held to the chain's length) or whose pieces cover less than
 //!    `min_paint_share` of their length, single named pieces that are not solid, and
 //!    solid lines of at most 3 named pieces with less paint than `scant_solid_paint_m` are
 //!    dropped: isolated dashes or noise do not make lane lines.
@@ -582,11 +583,19 @@ pub fn grow_with_barriers(
     let mut out = Lanes::default();
     for mut chain in chains {
         chain.sort_by(|&a, &b| items[a].so[0][0].total_cmp(&items[b].so[0][0]).then(a.cmp(&b)));
-        for (class, members) in regimes(&items, &chain, p, seen.map(|_| &gap_at as &dyn Fn(_, _) -> Gap)) {
+        let regs = regimes(&items, &chain, p, seen.map(|_| &gap_at as &dyn Fn(_, _) -> Gap));
+        // A dashed stretch split off a longer line (the dashes a solid line turns into
+        // after a junction) is held to the whole line's length: its dashes already passed
+        // the dash tests, and cutting it off at `min_length_m` drops the short dashed
+        // stretches that lines begin or end with.
+        let chain_long =
+            regs.len() > 1 && end_of(&items, &chain) - items[chain[0]].so[0][0] >= p.min_length_m;
+        for (class, members) in regs {
             let s0 = items[members[0]].so[0][0];
             let s1 = end_of(&items, &members);
             let named = members.iter().filter(|&&m| !items[m].neutral).count();
-            if s1 - s0 < p.min_length_m || (named == 1 && class != LaneLineClass::SolidLine) {
+            let long_enough = s1 - s0 >= p.min_length_m || (chain_long && class == LaneLineClass::DashedLine);
+            if !long_enough || (named == 1 && class != LaneLineClass::SolidLine) {
                 continue;
             }
             let painted: f64 = members
@@ -1631,6 +1640,37 @@ mod tests {
         let lanes = grow(&dash_pieces(&sparse), &t, &p);
         assert_eq!(lanes.lines.len(), 1);
         assert_eq!(lanes.lines[0].class, LaneLineClass::SolidLine);
+    }
+
+    /// A solid line 30 m long turns into three 2 m dashes (a 14 m dashed stretch after a
+    /// junction, shorter than `min_length_m` alone): the dashes are a dashed lane line of
+    /// their own. Three dashes alone are no lane line.
+    #[test]
+    fn a_short_dashed_stretch_after_a_solid_line_is_kept() {
+        let t = test_straight_trajectory(100, -20.0);
+        let p = Params::default();
+        let mut pieces = vec![piece(0, 0.0, 30.0, MarkingClass::SolidLine)];
+        pieces.extend(
+            [(35.0, 37.0), (41.0, 43.0), (47.0, 49.0)]
+                .iter()
+                .enumerate()
+                .map(|(i, &(a, b))| piece(i + 1, a, b, MarkingClass::DashedLine)),
+        );
+        let lanes = grow(&pieces, &t, &p);
+        let mut got: Vec<(LaneLineClass, f64)> = lanes.lines.iter().map(|l| (l.class, l.length_m)).collect();
+        got.sort_by(|a, b| a.1.total_cmp(&b.1));
+        assert_eq!(got.len(), 2, "{got:?}");
+        assert_eq!(got[0].0, LaneLineClass::DashedLine);
+        assert!((got[0].1 - 14.0).abs() < 0.5, "{got:?}");
+        assert_eq!(got[1].0, LaneLineClass::SolidLine);
+        let dashed = lanes
+            .classes
+            .iter()
+            .filter(|c| c.1 == MarkingClass::DashedLine)
+            .count();
+        assert_eq!(dashed, 3);
+        let alone = grow(&pieces[1..], &t, &p);
+        assert!(alone.lines.is_empty(), "{:?}", alone.lines.len());
     }
 
     /// The period of dash centres: the median spacing where it fits; where missing
