@@ -1357,22 +1357,28 @@ const CROSSED_BAR_OFFSET_M: f64 = 0.2;
 /// centre line or edge line that continues beside it.
 const CROSSED_BAR_INSET_M: f64 = 0.3;
 
+/// How far (m) a line piece must reach beyond a bar's side to run on past it.
+const CROSSED_BAR_REACH_M: f64 = 0.3;
+/// How far (m) beyond a bar's end the centre of a line running past that end may lie:
+/// the bar's points stop at the line's edge (or were peeled off with it).
+const CROSSED_BAR_END_OUT_M: f64 = 0.4;
+
 /// A "stop line" across the road that a lane line runs on through is no stop line: lanes
 /// end at a stop line, they do not continue through it. An expansion joint, a cable trench
 /// or a bright seam across a ramp looks like a stop line and would otherwise cut the lane
-/// lines it crosses (stop lines are barriers to lane-line growth). Such a bar — across
-/// the road, with a solid or dashed piece ending at most [`CROSSED_BAR_GAP_M`] before it
-/// and another starting at most as far after it, at the same offset (±
-/// [`CROSSED_BAR_OFFSET_M`]) and inside the bar's ends by [`CROSSED_BAR_INSET_M`], with no
-/// crosswalk stripe within that distance — becomes `unknown`.
+/// lines it crosses (stop lines are barriers to lane-line growth). A line runs on through
+/// a bar where a solid or dashed piece reaches at most [`CROSSED_BAR_GAP_M`] before it and
+/// one (the same or another) at most as far after it, at the same offset (±
+/// [`CROSSED_BAR_OFFSET_M`]) at the bar. Such a bar — across the road, crossed by a line
+/// inside its ends by [`CROSSED_BAR_INSET_M`], or with lines running on past both of its
+/// ends (a joint across one lane, between two lines that go on), with no crosswalk stripe
+/// within that distance — becomes `unknown`. A stop line has a line running on past one
+/// end at most (the centre line to the crossing; the lane lines end at it).
 fn stop_lines_crossed_by_lines(pieces: &mut [Piece], refl: &RefLine) {
-    // (start s, start o, end s, end o) of the line pieces.
-    let ends: Vec<[f64; 4]> = line_samples(pieces, refl)
-        .iter()
-        .map(|(_, so)| {
-            let (a, b) = (so[0], so[so.len() - 1]);
-            [a[0], a[1], b[0], b[1]]
-        })
+    // Each line piece's samples as (mileages, offsets).
+    let lines: Vec<(Vec<f64>, Vec<f64>)> = line_samples(pieces, refl)
+        .into_iter()
+        .map(|(_, so)| so.iter().map(|q| (q[0], q[1])).unzip())
         .collect();
     let crossings: Vec<[f64; 4]> = pieces
         .iter()
@@ -1391,17 +1397,23 @@ fn stop_lines_crossed_by_lines(pieces: &mut [Piece], refl: &RefLine) {
         if near_crossing {
             continue;
         }
-        let inside = |o: f64| o >= o0 + CROSSED_BAR_INSET_M && o <= o1 - CROSSED_BAR_INSET_M;
-        let crossed = ends.iter().any(|a| {
-            a[2] <= s0 + 0.3
-                && a[2] >= s0 - CROSSED_BAR_GAP_M
-                && inside(a[3])
-                && ends.iter().any(|b| {
-                    b[0] >= s1 - 0.3
-                        && b[0] <= s1 + CROSSED_BAR_GAP_M
-                        && (b[1] - a[3]).abs() <= CROSSED_BAR_OFFSET_M
-                })
-        });
+        // Whether a line runs on through the bar at an offset (at the bar) in [lo, hi].
+        let runs_on = |lo: f64, hi: f64| {
+            lines.iter().any(|(sa, oa)| {
+                let before = sa[0] <= s0 - CROSSED_BAR_REACH_M && sa[sa.len() - 1] >= s0 - CROSSED_BAR_GAP_M;
+                let at = geom::interp_clamped(sa, oa, s0);
+                before
+                    && (lo..=hi).contains(&at)
+                    && lines.iter().any(|(sb, ob)| {
+                        sb[sb.len() - 1] >= s1 + CROSSED_BAR_REACH_M
+                            && sb[0] <= s1 + CROSSED_BAR_GAP_M
+                            && (geom::interp_clamped(sb, ob, s1) - at).abs() <= CROSSED_BAR_OFFSET_M
+                    })
+            })
+        };
+        let crossed = runs_on(o0 + CROSSED_BAR_INSET_M, o1 - CROSSED_BAR_INSET_M)
+            || (runs_on(o0 - CROSSED_BAR_END_OUT_M, o0 + CROSSED_BAR_INSET_M)
+                && runs_on(o1 - CROSSED_BAR_INSET_M, o1 + CROSSED_BAR_END_OUT_M));
         if crossed {
             p.marking.class = MarkingClass::Unknown;
         }
@@ -2256,6 +2268,11 @@ mod tests {
             MarkingClass::Unknown
         );
         assert_eq!(class_of_bar(vec![bar(), dash(25.0)]), MarkingClass::StopLine);
+        // One solid piece running on through it unbroken.
+        assert_eq!(
+            class_of_bar(vec![bar(), shifted(solid(0.0, 60.0), 1.75)]),
+            MarkingClass::Unknown
+        );
         // Beyond 10 m on: not the same line running on.
         assert_eq!(
             class_of_bar(vec![bar(), dash(25.0), dash(41.0)]),
@@ -2266,6 +2283,21 @@ mod tests {
             class_of_bar(vec![bar(), dash(25.0), dash(34.2), stripe]),
             MarkingClass::StopLine
         );
+        // A joint across one lane (between lines at -1.75 and 1.75): a solid line runs on
+        // past its left end unbroken and a dashed line past its right end, so it is no stop
+        // line; with the dashed line ending at it, it stays one.
+        let joint = || rect(MarkingClass::StopLine, 30.0, 30.2, -1.6, 1.65);
+        let through = || shifted(solid(0.0, 60.0), 1.75);
+        let dash_r = |x0: f64| super::tests::dash(x0, -1.75);
+        assert_eq!(
+            class_of_bar(vec![joint(), through(), dash_r(28.5), dash_r(37.0)]),
+            MarkingClass::Unknown
+        );
+        assert_eq!(
+            class_of_bar(vec![joint(), through(), dash_r(28.0)]),
+            MarkingClass::StopLine
+        );
+        assert_eq!(class_of_bar(vec![joint(), through()]), MarkingClass::StopLine);
     }
 
     /// Bars across the road: between the edge lines (or just beyond one) they stay stop
