@@ -23,8 +23,9 @@
 //! from north. Lane lines: see `lanes` (improved line-segment self-growth of Yao 2021).
 //!
 //! `assemble`, in order: crosswalk stripes put on their crossing's design (`crosswalks`:
-//! common width and edges, worn fragments absorbed, missing stripes filled); "stop lines"
-//! along the road at the offset of a line piece they continue made line pieces (a far
+//! common width and edges, worn fragments absorbed, missing stripes filled); stop lines
+//! that are not clearly paint (median contrast below `stop_line_min_contrast`) made
+//! `unknown`; "stop lines" along the road at the offset of a line piece they continue made line pieces (a far
 //! line's sparse pieces read as bars); stop lines joined with the marks on their centre
 //! line (`stoplines`); "stop lines" across the road that a lane line runs on through made
 //! `unknown`; lane-line growth with crosswalks and stop lines as barriers; bars across the
@@ -110,6 +111,13 @@ pub struct Params {
     /// [`faint_unknown`]). Default 1.5 (the pixel threshold's floor is 1.25); 0 keeps every
     /// `unknown` marking.
     pub unknown_min_contrast: f64,
+    /// A stop line whose points are not clearly paint — the median of their intensity over
+    /// the asphalt background below this — becomes `unknown` (see [`faint_stop_lines`]): a
+    /// stop line is painted thick and bright, worn ones included, while the bright edge of a
+    /// resurfaced strip or a joint across the road is barely above the asphalt. Default 1.6
+    /// (between `unknown_min_contrast` and the faintest worn stop line, about 1.8); 0 keeps
+    /// every stop line.
+    pub stop_line_min_contrast: f64,
     /// The stripes of a zebra crossing (≥ 3 crosswalk stripes side by side) get the
     /// crossing's design: the common stripe width and the two edges their ends line up on;
     /// worn fragments lying on a stripe's position are absorbed into it (see `crosswalks`).
@@ -143,6 +151,7 @@ impl Default for Params {
             fill_missing_dashes: 1,
             widen_undersampled: true,
             unknown_min_contrast: 1.5,
+            stop_line_min_contrast: 1.6,
             regularize_crosswalks: true,
             fill_missing_stripes: 1,
             join_stop_lines: true,
@@ -162,6 +171,7 @@ impl Params {
         check_range("bridge_long_gap_m", self.bridge_long_gap_m, 0.0, 50.0)?;
         check_range("fill_missing_dashes", self.fill_missing_dashes as f64, 0.0, 10.0)?;
         check_range("unknown_min_contrast", self.unknown_min_contrast, 0.0, 100.0)?;
+        check_range("stop_line_min_contrast", self.stop_line_min_contrast, 0.0, 100.0)?;
         check_range(
             "fill_missing_stripes",
             self.fill_missing_stripes as f64,
@@ -522,6 +532,17 @@ const RECENTRE_MAX_OFFSET_M: f64 = 0.15;
 /// upstream) are kept.
 fn faint_unknown(p: &Piece, min_contrast: f64) -> bool {
     p.marking.class == MarkingClass::Unknown && p.contrast.is_some_and(|c| c < min_contrast)
+}
+
+/// Stop lines whose median contrast over the asphalt is below `min_contrast` become
+/// `unknown` (see [`Params::stop_line_min_contrast`]); so they no longer stop lane-line
+/// growth as a barrier, and [`faint_unknown`] may drop them.
+fn faint_stop_lines(pieces: &mut [Piece], min_contrast: f64) {
+    for p in pieces.iter_mut() {
+        if p.marking.class == MarkingClass::StopLine && p.contrast.is_some_and(|c| c < min_contrast) {
+            p.marking.class = MarkingClass::Unknown;
+        }
+    }
 }
 
 /// Resolved pieces of a lane line must cover this much (m) to give it a reference width.
@@ -1590,6 +1611,7 @@ pub fn assemble(
         pieces
     };
     let mut pieces = pieces;
+    faint_stop_lines(&mut pieces, params.stop_line_min_contrast);
     lines_not_stop_lines(&mut pieces, &refl);
     stop_lines_crossed_by_lines(&mut pieces, &refl);
     let pieces = if params.join_stop_lines {
@@ -2248,6 +2270,51 @@ mod tests {
         };
         let (marks, _) = assemble(pieces(), &traj, &off, None);
         assert_eq!(marks.len(), 4);
+    }
+
+    /// A bar across the road is a stop line only where its points are clearly paint: one at
+    /// 1.9 times the asphalt (a worn stop line) stays one, one at 1.55 (the edge of a
+    /// resurfaced strip) becomes `unknown`, and one at 1.4 is then dropped as a faint
+    /// `unknown`; with the parameter at 0 all three are stop lines.
+    #[test]
+    fn faint_bars_are_no_stop_lines() {
+        let traj = crate::pipeline::types::test_straight_trajectory(100, -20.0);
+        let bar = |x0: f64, contrast: f64| Piece {
+            contrast: Some(contrast),
+            ..rect(MarkingClass::StopLine, x0, x0 + 0.4, -1.75, 5.25)
+        };
+        let pieces = || vec![bar(20.0, 1.9), bar(40.0, 1.55), bar(60.0, 1.4)];
+        let classes = |ms: &[Marking]| -> Vec<(f64, MarkingClass)> {
+            let mut v: Vec<(f64, MarkingClass)> = ms
+                .iter()
+                .map(|m| {
+                    (
+                        m.outline.iter().map(|q| q[0]).fold(f64::INFINITY, f64::min),
+                        m.class,
+                    )
+                })
+                .collect();
+            v.sort_by(|a, b| a.0.total_cmp(&b.0));
+            v
+        };
+        let (marks, _) = assemble(pieces(), &traj, &Params::default(), None);
+        assert_eq!(
+            classes(&marks),
+            vec![(20.0, MarkingClass::StopLine), (40.0, MarkingClass::Unknown)]
+        );
+        let off = Params {
+            stop_line_min_contrast: 0.0,
+            ..Params::default()
+        };
+        let (marks, _) = assemble(pieces(), &traj, &off, None);
+        assert_eq!(
+            classes(&marks),
+            vec![
+                (20.0, MarkingClass::StopLine),
+                (40.0, MarkingClass::StopLine),
+                (60.0, MarkingClass::StopLine)
+            ]
+        );
     }
 
     /// A bar across the road (0.2 m × 7 m) that a dashed line runs on through (dashes ending
