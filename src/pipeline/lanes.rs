@@ -47,7 +47,10 @@
 //!    (≥ 75 % of the spacings within ±15 % of one period or twice it, the period being the
 //!    median spacing or, where missing dashes make the median fall between single and
 //!    double spacings, the repeated single spacing; dashes seen
-//!    only in part have irregular lengths but keep the period); everything else is solid
+//!    only in part have irregular lengths but keep the period), and, where most gaps were
+//!    seen bare, dash-like runs whose centres lie on one period's grid with runs of dashes
+//!    missing (≥ 75 % of the spacings within 0.6 m of 1–8 periods; a far line crossed by
+//!    few scan rows); everything else is solid
 //!    (occlusion breaks a solid line into irregular runs). Where the scanner's view is
 //!    known, a dashed stretch also needs a third of its gaps (at least one) seen bare: the
 //!    fragments of a far solid line can have the lengths and spacing of dashes, but their
@@ -285,6 +288,14 @@ const COURSE_HALF_WIDTH_M: f64 = 0.05;
 const PERIOD_JITTER: f64 = 0.15;
 /// ... where most of the gaps were seen bare (the fragments' gaps are real).
 const BARE_PERIOD_JITTER: f64 = 0.25;
+
+/// How far (m) a spacing of dash centres may lie from a whole number of periods in the
+/// grid test ([`dash_grid`]). Absolute, not a share of the period: a spacing of k periods
+/// is as precise as one of one period (the centres of the two dashes it spans are what
+/// jitter), and a share of a long spacing would fit any spacing.
+const GRID_TOLERANCE_M: f64 = 0.6;
+/// Most whole periods one spacing of the grid test may span (dashes missing in a row).
+const GRID_MAX_PERIODS: f64 = 8.0;
 
 /// A painted run longer than this many times the median run of its group is no dash.
 const NOT_A_DASH_FACTOR: f64 = 4.0;
@@ -838,16 +849,7 @@ fn dash_period(spacings: &[f64], jitter: f64) -> Option<f64> {
     if fits(median) {
         return Some(median);
     }
-    spacings
-        .iter()
-        .filter_map(|&cand| {
-            let mut single: Vec<f64> = spacings
-                .iter()
-                .copied()
-                .filter(|&x| (x - cand).abs() <= jitter * cand)
-                .collect();
-            (single.len() >= 2).then(|| geom::median(&mut single))
-        })
+    period_candidates(spacings, |cand| jitter * cand)
         // Only to see through missing dashes: a double spacing must be among them (a
         // sparse solid line's fragments can show a loose single period, never this).
         .filter(|&period| {
@@ -855,6 +857,62 @@ fn dash_period(spacings: &[f64], jitter: f64) -> Option<f64> {
                 && spacings
                     .iter()
                     .any(|&x| (x / period).round() == 2.0 && on(period, x))
+        })
+        .max_by(|a, b| a.total_cmp(b))
+}
+
+/// Candidate single periods: for each spacing, the median of the spacings within
+/// `tolerance(spacing)` of it, where there are at least two.
+fn period_candidates<'a>(
+    spacings: &'a [f64],
+    tolerance: impl Fn(f64) -> f64 + 'a,
+) -> impl Iterator<Item = f64> + 'a {
+    spacings.iter().filter_map(move |&cand| {
+        let mut single: Vec<f64> = spacings
+            .iter()
+            .copied()
+            .filter(|&x| (x - cand).abs() <= tolerance(cand))
+            .collect();
+        (single.len() >= 2).then(|| geom::median(&mut single))
+    })
+}
+
+/// The period of dashes on a grid with many of them missing: a far line whose gaps were
+/// seen bare but whose dashes go unseen several in a row (few scan rows cross it), so the
+/// spacings of its dash centres are any whole number of periods (6, 24, 18, 6, 12 m on a
+/// 2/4 m line), which [`dash_period`] (one or two periods) does not accept.
+///
+/// At least two spacings within [`GRID_TOLERANCE_M`] of each other are single periods
+/// (the largest such candidate wins); the period is refitted by least squares over the
+/// spacings on the grid, and at least 75 % of the spacings must lie within
+/// [`GRID_TOLERANCE_M`] of 1 to [`GRID_MAX_PERIODS`] periods. The fragments of a worn solid
+/// line have bare gaps too, but spacings with no common period: on the 20 simulated
+/// drives' lines that fail the other dash tests, this one accepted only a far 2/4 m
+/// dashed line (and no solid line below a tolerance of 1.0 m).
+fn dash_grid(spacings: &[f64]) -> Option<f64> {
+    let on_grid = |period: f64, x: f64| {
+        let k = (x / period).round();
+        (1.0..=GRID_MAX_PERIODS).contains(&k) && (x - k * period).abs() <= GRID_TOLERANCE_M
+    };
+    period_candidates(spacings, |_| GRID_TOLERANCE_M)
+        .filter_map(|mut period| {
+            // Least squares x ≈ k·period over the spacings on the grid (twice: the whole
+            // numbers can change with the period).
+            for _ in 0..2 {
+                let (sxk, skk) =
+                    spacings
+                        .iter()
+                        .filter(|&&x| on_grid(period, x))
+                        .fold((0.0, 0.0), |(a, b), &x| {
+                            let k = (x / period).round();
+                            (a + x * k, b + k * k)
+                        });
+                if skk > 0.0 {
+                    period = sxk / skk;
+                }
+            }
+            let fit = spacings.iter().filter(|&&x| on_grid(period, x)).count();
+            (fit as f64 >= 0.75 * spacings.len() as f64).then_some(period)
         })
         .max_by(|a, b| a.total_cmp(b))
 }
@@ -982,14 +1040,14 @@ fn named_regimes(
         // (jitter ≤ half a dash: a sixth of a GB 2/4 m period), or twice it where one dash is
         // missing; a run longer than most of a period is no dash. A solid line sampled in
         // fragments has no such period.
-        let regular_period_within = |jitter: f64| {
-            lens.len() >= 3 && {
-                let centres: Vec<f64> = runs[i..=j].iter().map(|r| 0.5 * (r.0 + r.1)).collect();
-                let spacings: Vec<f64> = centres.windows(2).map(|w| w[1] - w[0]).collect();
-                dash_period(&spacings, jitter).is_some_and(|period| lens.iter().all(|&l| l <= 0.8 * period))
-            }
-        };
+        let centres: Vec<f64> = runs[i..=j].iter().map(|r| 0.5 * (r.0 + r.1)).collect();
+        let spacings: Vec<f64> = centres.windows(2).map(|w| w[1] - w[0]).collect();
+        let dashes_fit = |period: f64| lens.iter().all(|&l| l <= 0.8 * period);
+        let regular_period_within =
+            |jitter: f64| lens.len() >= 3 && dash_period(&spacings, jitter).is_some_and(dashes_fit);
         let regular_period = regular_period_within(PERIOD_JITTER);
+        // Dashes on a grid with runs of them missing, where their gaps were seen bare.
+        let on_grid = || lens.len() >= 3 && dash_grid(&spacings).is_some_and(dashes_fit);
         let beside_demoted = (i > 0 && demoted[i - 1]) || (j + 1 < runs.len() && demoted[j + 1]);
         let min_dashes = if beside_demoted {
             2 * p.min_dashes
@@ -1024,7 +1082,7 @@ fn named_regimes(
         if lens.len() >= min_dashes
             && (regular && regular_gaps
                 || regular_period
-                || mostly_bare() && regular_period_within(BARE_PERIOD_JITTER))
+                || mostly_bare() && (regular_period_within(BARE_PERIOD_JITTER) || on_grid()))
             && paint <= 0.7
             && bare_some()
         {
@@ -1703,6 +1761,40 @@ mod tests {
         let classes: Vec<LaneLineClass> = lanes.lines.iter().map(|l| l.class).collect();
         assert_eq!(lanes.lines.len(), 2, "{classes:?}");
         assert!(classes.contains(&LaneLineClass::DashedLine) && classes.contains(&LaneLineClass::SolidLine));
+    }
+
+    /// A far 2/4 m dashed line (urban drive s2, offset 12.8 m) seen as one dash in 1–4,
+    /// its gaps seen bare: the centres' spacings are 1, 4, 3, 1, 2, 1 and 2 periods. The
+    /// fragments of a worn solid line (urban drive s1001, offset 16.2 m), gaps seen bare
+    /// too, have no common period and stay solid.
+    #[test]
+    fn far_dashes_missing_in_runs_are_dashed_on_their_grid() {
+        let t = traj();
+        let p = Params::default();
+        let seen = crate::pipeline::observed::test_seen_except(&t, 3.5, |_| false);
+        let class_of = |centres: &[f64], lens: &[f64]| {
+            let spans: Vec<(f64, f64)> = centres
+                .iter()
+                .zip(lens)
+                .map(|(&c, &l)| (c - l / 2.0, c + l / 2.0))
+                .collect();
+            let lanes = grow_with_barriers(&dash_pieces(&spans), &t, &p, &[], Some(&seen.lookup()));
+            let classes: Vec<LaneLineClass> = lanes.lines.iter().map(|l| l.class).collect();
+            assert_eq!(classes.len(), 1, "{classes:?}");
+            classes[0]
+        };
+        let far = [0.2, 6.5, 30.1, 48.3, 54.2, 66.2, 72.3, 84.1];
+        let far_lens = [1.7, 0.6, 2.0, 1.9, 1.8, 1.9, 1.7, 1.9];
+        assert_eq!(class_of(&far, &far_lens), LaneLineClass::DashedLine);
+        let worn = [4.1, 7.1, 14.9, 18.3, 24.7, 28.1, 41.2, 45.7, 50.0];
+        let worn_lens = [1.1, 1.8, 3.1, 1.1, 1.2, 2.7, 1.8, 1.3, 1.1];
+        assert_eq!(class_of(&worn, &worn_lens), LaneLineClass::SolidLine);
+        assert_eq!(
+            dash_grid(&[6.3, 23.6, 18.2, 5.9, 12.0, 6.1, 11.8]).map(|p| (p * 10.0).round()),
+            Some(60.0)
+        );
+        // One single spacing gives no period.
+        assert_eq!(dash_grid(&[6.3, 23.6, 18.2, 12.0]), None);
     }
 
     #[test]
