@@ -238,3 +238,65 @@ fn simulated_highway_pixel_f_and_point_scores_do_not_regress() {
     assert!(p >= POINT_P_FLOOR, "point precision {p:.3} below {POINT_P_FLOOR}");
     assert!(r >= POINT_R_FLOOR, "point recall {r:.3} below {POINT_R_FLOOR}");
 }
+
+/// `roadmark extract` without ONNX Runtime: with the default `learned.mode` (auto) it runs
+/// on the geometric classes and says so on stderr with the install hint; with `on` it
+/// stops before reading any point, naming the missing library.
+#[test]
+fn extract_says_when_the_learned_classifier_is_missing() {
+    let dir = tempfile::tempdir().unwrap();
+    let bin = env!("CARGO_BIN_EXE_roadmark");
+    let survey = dir.path().join("s");
+    let sim = std::process::Command::new(bin)
+        .args([
+            "simulate",
+            "--scene",
+            "highway",
+            "--seed",
+            "3",
+            "--length-m",
+            "40",
+            "--out",
+        ])
+        .arg(&survey)
+        .output()
+        .unwrap();
+    assert!(sim.status.success(), "{}", String::from_utf8_lossy(&sim.stderr));
+    let missing = "/nonexistent/libonnxruntime.so.1.31.1";
+    let extract = |params: Option<&str>| {
+        let mut cmd = std::process::Command::new(bin);
+        cmd.args(["extract", "--crs", "native", "--points"])
+            .arg(survey.join("points.las"))
+            .arg("--trajectory")
+            .arg(survey.join("trajectory.csv"))
+            .arg("--output")
+            .arg(dir.path().join("out.geojson"))
+            .env("ORT_DYLIB_PATH", missing);
+        if let Some(json) = params {
+            let p = dir.path().join("params.json");
+            std::fs::write(&p, json).unwrap();
+            cmd.arg("--params").arg(p);
+        }
+        cmd.output().unwrap()
+    };
+    let out = extract(None);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(dir.path().join("out.geojson").is_file());
+    assert!(err.contains("warning") && err.contains(missing), "{err}");
+    assert!(err.contains("pip install --no-deps onnxruntime"), "{err}");
+    std::fs::remove_file(dir.path().join("out.geojson")).unwrap();
+
+    let out = extract(Some(r#"{"learned": {"mode": "on"}}"#));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(err.contains("learned.mode") && err.contains(missing), "{err}");
+    assert!(
+        !dir.path().join("out.geojson").exists(),
+        "no output without the classifier"
+    );
+
+    let out = extract(Some(r#"{"learned": {"mode": "off"}}"#));
+    assert!(out.status.success());
+    assert!(out.stderr.is_empty(), "{}", String::from_utf8_lossy(&out.stderr));
+}

@@ -7,6 +7,8 @@
 
 use crate::pipeline::driver::{self, RunStats};
 use crate::pipeline::geojson::{self, CrsMode};
+use crate::pipeline::learned::Classifier;
+use crate::pipeline::learned::refine::Mode;
 use crate::pipeline::params::{Params, ValidParams};
 use crate::pipeline::{Extraction, Inputs, MarkingClass, Progress};
 use anyhow::{Context, bail};
@@ -131,6 +133,7 @@ pub fn summary_line(ex: &Extraction, stats: &RunStats, output: &Path) -> String 
 pub fn run(args: Args) -> anyhow::Result<()> {
     // Parameters first: a typo must not cost a pipeline run.
     let params = load_params(args.params.as_deref())?;
+    check_classifier(&params, &mut std::io::stderr())?;
     if let Some(dir) = args.output.parent().filter(|d| !d.as_os_str().is_empty())
         && !dir.is_dir()
     {
@@ -154,6 +157,30 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .with_context(|| format!("{}: cannot write", args.output.display()))?;
     println!("{}", summary_line(&ex, &stats, &args.output));
     Ok(())
+}
+
+/// The learned classifier, loaded before any point is read: with `learned.mode` `on` a
+/// missing ONNX Runtime (or a model it cannot run) is an error; with `auto` the run goes on
+/// with the geometric classes alone (no arrows, no diamonds), and says so on `warn` with
+/// the install hint, instead of only in a log nobody reads from the command line.
+fn check_classifier(params: &ValidParams, warn: &mut dyn std::io::Write) -> anyhow::Result<()> {
+    let mode = params.learned.mode;
+    if mode == Mode::Off {
+        return Ok(());
+    }
+    match Classifier::shared() {
+        Ok(_) => Ok(()),
+        Err(e) if mode == Mode::On => Err(e).context("learned.mode is \"on\""),
+        Err(e) => {
+            writeln!(
+                warn,
+                "roadmark: warning: the learned marking classifier is off for this run, so \
+                 arrows and diamonds stay `unknown` ({e}); set learned.mode to \"off\" to \
+                 silence this or to \"on\" to make it an error"
+            )?;
+            Ok(())
+        }
+    }
 }
 
 pub(crate) fn write_output(path: &Path, ex: &Extraction, mode: CrsMode) -> anyhow::Result<()> {
