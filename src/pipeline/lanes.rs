@@ -22,11 +22,15 @@
 //!    `lateral_tolerance_m + lateral_tolerance_per_m × gap`, their directions differ ≤
 //!    `max_angle_deg` (plus, across gaps up to 3 m, the direction uncertainty of short
 //!    pieces: atan(0.05 m / length) each, so a far line's 1 m fragments chain), and
-//!    their widths are similar (≥ `min_width_similarity`; lengths are not compared, so
-//!    dashes and solid pieces join). Links are made between mutual best
-//!    matches (cost = offset mismatch / tolerance + gap / 2·max_gap), so the result does not
+//!    their widths are similar (≥ `min_width_similarity`, widths under the narrowest
+//!    painted line, 0.10 m, counting as 0.10 m: a far fragment crossed by one scan row
+//!    reads 3 cm; lengths are not compared, so dashes and solid pieces join). Links are
+//!    made between mutual best matches (cost = offset mismatch / tolerance + gap /
+//!    2·max_gap), so the result does not
 //!    depend on a seed cluster and growth runs in both directions at once. Two rounds: the
-//!    second links whole chains, with slopes estimated over their last 15 m. Where the
+//!    second links whole chains, with slopes estimated over their last 15 m (further back,
+//!    up to 60 m, until the samples span 10 m: a sparse chain's last 15 m may hold one
+//!    fragment), each direction as uncertain as the extent it was fitted over. Where the
 //!    caller knows what the scanner saw (`super::observed`) and it saw no bare asphalt on
 //!    a gap's course, the gap may be up to `max_unseen_gap_m`, the offsets may match
 //!    without extrapolating the slopes, and short pieces' directions count with their
@@ -84,6 +88,7 @@
 //! # Complexity
 //! O(p log p + p·k) for p pieces with k candidates within the gap window; O(v) output.
 
+use super::classify::MIN_PAINT_WIDTH_M;
 use super::geom;
 use super::observed::{Gap, Lookup};
 use super::refline::RefLine;
@@ -265,6 +270,11 @@ struct Seg {
     o1: f64,
     slope0: f64,
     slope1: f64,
+    /// Along-track extent of the samples `slope0` and `slope1` are fitted on (m, 0.1–15):
+    /// how well the end directions are known. A long chain whose last 15 m hold one 1 m
+    /// fragment knows its end direction as poorly as that fragment does.
+    fit0: f64,
+    fit1: f64,
     width: f64,
     /// Along-track length its members cover (m; overlaps counted twice).
     painted: f64,
@@ -278,6 +288,10 @@ pub const SCANT_SOLID_MAX_PIECES: usize = 3;
 /// direction of a piece L metres long is known to about atan(SLOPE_NOISE_M / L) (3° for a
 /// 1 m far-range fragment, 0.2° for 15 m), which is added to `max_angle_deg`.
 const SLOPE_NOISE_M: f64 = 0.05;
+
+/// Least along-track extent (m) of the samples a chain's end slope is fitted on, where
+/// the chain has them within 4 × 15 m of its end (see `end_slope`).
+const END_FIT_MIN_M: f64 = 10.0;
 
 /// Half width (m) of the course whose cells tell whether a gap was seen (see
 /// [`super::observed`]): the middle of a 0.15 m line, allowing a few centimetres of
@@ -312,10 +326,10 @@ const SOLID_SHARE: f64 = 0.7;
 const SLACK_GAP_M: f64 = 3.0;
 
 impl Seg {
-    /// Along-track length its end slopes are fitted over (m; ≤ 15 m, see `seg_of`): a
+    /// Along-track extent its start (`at_end` false) or end slope is fitted over (m): a
     /// short piece's direction is uncertain by about [`SLOPE_NOISE_M`] over it.
-    fn span(&self) -> f64 {
-        (self.s1 - self.s0).clamp(0.1, 15.0)
+    fn fit(&self, at_end: bool) -> f64 {
+        if at_end { self.fit1 } else { self.fit0 }
     }
 }
 
@@ -325,19 +339,33 @@ fn slope_noise(s: &Seg) -> f64 {
     SLOPE_NOISE_M.max(0.5 * s.width)
 }
 
-/// Least-squares slope do/ds of samples with s within `span` of the start or end.
-fn end_slope(so: &[[f64; 2]], at_end: bool, span: f64) -> f64 {
+/// Least-squares slope do/ds of samples (sorted by s) with s within `span` of the start
+/// or end, and the along-track extent of those samples (at least 0.1 m).
+fn end_slope(so: &[[f64; 2]], at_end: bool, span: f64) -> (f64, f64) {
     if so.len() < 2 {
-        return 0.0;
+        return (0.0, 0.1);
     }
-    let pick: Vec<[f64; 2]> = if at_end {
-        let lim = so[so.len() - 1][0] - span;
-        so.iter().copied().filter(|q| q[0] >= lim).collect()
-    } else {
-        let lim = so[0][0] + span;
-        so.iter().copied().filter(|q| q[0] <= lim).collect()
+    let window = |w: f64| -> Vec<[f64; 2]> {
+        if at_end {
+            let lim = so[so.len() - 1][0] - w;
+            so.iter().copied().filter(|q| q[0] >= lim).collect()
+        } else {
+            let lim = so[0][0] + w;
+            so.iter().copied().filter(|q| q[0] <= lim).collect()
+        }
     };
-    geom::ls_slope(&pick).map_or(0.0, |k| k.clamp(-0.5, 0.5))
+    let ext = |p: &[[f64; 2]]| p[p.len() - 1][0] - p[0][0];
+    let mut pick = window(span);
+    // A sparse chain's last `span` metres may hold one short fragment: the window widens
+    // (to at most 4 × `span`) until its samples extend over `END_FIT_MIN_M`.
+    for k in 2..=4 {
+        if ext(&pick) >= END_FIT_MIN_M {
+            break;
+        }
+        pick = window(span * k as f64);
+    }
+    let extent = ext(&pick).clamp(0.1, 15.0);
+    (geom::ls_slope(&pick).map_or(0.0, |k| k.clamp(-0.5, 0.5)), extent)
 }
 
 fn seg_of(items: &[Item], members: Vec<usize>) -> Seg {
@@ -347,13 +375,16 @@ fn seg_of(items: &[Item], members: Vec<usize>) -> Seg {
         .collect();
     so.sort_by(|a, b| a[0].total_cmp(&b[0]));
     let w = members.iter().map(|&m| items[m].width).sum::<f64>() / members.len() as f64;
+    let ((slope0, fit0), (slope1, fit1)) = (end_slope(&so, false, 15.0), end_slope(&so, true, 15.0));
     Seg {
         s0: so[0][0],
         s1: so[so.len() - 1][0],
         o0: so[0][1],
         o1: so[so.len() - 1][1],
-        slope0: end_slope(&so, false, 15.0),
-        slope1: end_slope(&so, true, 15.0),
+        slope0,
+        slope1,
+        fit0,
+        fit1,
         width: w,
         painted: members
             .iter()
@@ -395,7 +426,7 @@ fn link(
             let tol = p.lateral_tolerance_m + p.lateral_tolerance_per_m * g;
             // ... but only across short gaps: two short pieces far apart are weak evidence
             // of one line whatever their directions.
-            let slack = ((SLOPE_NOISE_M / sa.span()).atan() + (SLOPE_NOISE_M / sb.span()).atan())
+            let slack = ((SLOPE_NOISE_M / sa.fit(true)).atan() + (SLOPE_NOISE_M / sb.fit(false)).atan())
                 * (SLACK_GAP_M / g.max(1e-6)).min(1.0);
             let turn = (sa.slope1.atan() - sb.slope0.atan()).abs();
             // Where the offsets only meet by extrapolating the slopes, the extrapolation must
@@ -404,7 +435,7 @@ fn link(
             // times g/2. A short wide blob (both lines of a worn double line, an arrow's
             // head) does not steer a link metres sideways across a long gap.
             let flat = (sa.o1 - sb.o0).abs();
-            let unsure = 0.5 * g * (slope_noise(sa) / sa.span() + slope_noise(sb) / sb.span());
+            let unsure = 0.5 * g * (slope_noise(sa) / sa.fit(true) + slope_noise(sb) / sb.fit(false));
             let extrapolated = flat > tol && unsure > tol;
             // What the scanner saw on the gap's course, looked up once and only if asked.
             let seen = std::cell::OnceCell::new();
@@ -427,7 +458,8 @@ fn link(
                 // the evidence there is of the line: a short fragment's own slope (a 1 m
                 // far-range piece's is off by several degrees) is not extrapolated, and its
                 // direction counts with its full uncertainty however long the gap.
-                let full_slack = (SLOPE_NOISE_M / sa.span()).atan() + (SLOPE_NOISE_M / sb.span()).atan();
+                let full_slack =
+                    (SLOPE_NOISE_M / sa.fit(true)).atan() + (SLOPE_NOISE_M / sb.fit(false)).atan();
                 if g > p.max_unseen_gap_m
                     || dev.min(flat) > tol
                     || turn > max_tan + full_slack
@@ -448,7 +480,11 @@ fn link(
             {
                 continue;
             }
-            if sa.width.min(sb.width) + 0.05 < p.min_width_similarity * (sa.width.max(sb.width) + 0.05) {
+            // A width under the narrowest painted line is a sparse piece's under-reading
+            // (a far line's fragment crossed by one scan row reads 3 cm) and compares as
+            // that narrowest line.
+            let (wa, wb) = (sa.width.max(MIN_PAINT_WIDTH_M), sb.width.max(MIN_PAINT_WIDTH_M));
+            if wa.min(wb) + 0.05 < p.min_width_similarity * (wa.max(wb) + 0.05) {
                 continue;
             }
             // The mismatch that ranks candidates is the smaller of the extrapolated and the
@@ -1299,6 +1335,8 @@ mod tests {
             o1: o0 + slope * (s1 - s0),
             slope0: slope,
             slope1: slope,
+            fit0: (s1 - s0).clamp(0.1, 15.0),
+            fit1: (s1 - s0).clamp(0.1, 15.0),
             width,
             painted: s1 - s0,
         }
@@ -1761,6 +1799,46 @@ mod tests {
         let classes: Vec<LaneLineClass> = lanes.lines.iter().map(|l| l.class).collect();
         assert_eq!(lanes.lines.len(), 2, "{classes:?}");
         assert!(classes.contains(&LaneLineClass::DashedLine) && classes.contains(&LaneLineClass::SolidLine));
+    }
+
+    /// A chain's end direction comes from at least 10 m of its samples: a straight line
+    /// sampled to 40 m and then one 1 m fragment 16 m on, tilted 6°, ends straight (the
+    /// fragment alone set it before, and the chain was taken to know it over 15 m).
+    #[test]
+    fn a_sparse_chain_end_slope_spans_ten_metres() {
+        let mut so: Vec<[f64; 2]> = (0..=40).map(|s| [s as f64, 26.5]).collect();
+        so.extend([[56.0, 26.5], [56.5, 26.45], [57.0, 26.4]]);
+        let (slope, fit) = end_slope(&so, true, 15.0);
+        assert!(slope.abs() < 0.01 && fit >= 10.0, "{slope} {fit}");
+        // Dense samples: the last 15 m as before.
+        let dense: Vec<[f64; 2]> = (0..=60).map(|s| [s as f64, 0.01 * s as f64]).collect();
+        let (slope, fit) = end_slope(&dense, true, 15.0);
+        assert!(
+            (slope - 0.01).abs() < 1e-9 && (fit - 15.0).abs() < 1e-9,
+            "{slope} {fit}"
+        );
+    }
+
+    /// A far line whose every other piece was crossed by one scan row and reads 3 cm wide
+    /// is one lane line: a width under the narrowest painted line compares as that line
+    /// (0.03 against 0.15 m failed the width similarity, and the 0.15 m pieces, 41 m apart,
+    /// are too far apart to link past the narrow ones).
+    #[test]
+    fn under_read_far_pieces_join_their_line() {
+        let t = traj();
+        let p = Params::default();
+        let pieces: Vec<LanePiece> = (0..5)
+            .map(|i| {
+                let s0 = 22.0 * i as f64;
+                LanePiece {
+                    width_m: if i % 2 == 0 { 0.15 } else { 0.03 },
+                    ..piece(i, s0, s0 + 3.0, MarkingClass::DashedLine)
+                }
+            })
+            .collect();
+        let lanes = grow(&pieces, &t, &p);
+        let pieces_per_line: Vec<usize> = lanes.lines.iter().map(|l| l.pieces.len()).collect();
+        assert_eq!(pieces_per_line, vec![5]);
     }
 
     /// A far 2/4 m dashed line (urban drive s2, offset 12.8 m) seen as one dash in 1–4,
