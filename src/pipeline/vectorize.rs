@@ -2290,9 +2290,13 @@ mod tests {
     #[test]
     fn faint_bars_are_no_stop_lines() {
         let traj = crate::pipeline::types::test_straight_trajectory(100, -20.0);
-        let bar = |x0: f64, contrast: f64| Piece {
-            contrast: Some(contrast),
-            ..rect(MarkingClass::StopLine, x0, x0 + 0.4, -1.75, 5.25)
+        let bar = |x0: f64, contrast: f64| {
+            let mut p = rect(MarkingClass::StopLine, x0, x0 + 0.4, -1.75, 5.25);
+            p.marking.width_m = 0.4;
+            Piece {
+                contrast: Some(contrast),
+                ..p
+            }
         };
         let pieces = || vec![bar(20.0, 1.9), bar(40.0, 1.55), bar(60.0, 1.4)];
         let classes = |ms: &[Marking]| -> Vec<(f64, MarkingClass)> {
