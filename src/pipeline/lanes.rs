@@ -340,7 +340,8 @@ fn slope_noise(s: &Seg) -> f64 {
 }
 
 /// Least-squares slope do/ds of samples (sorted by s) with s within `span` of the start
-/// or end, and the along-track extent of those samples (at least 0.1 m).
+/// or end (further, see below), and the along-track extent of the samples it was fitted
+/// on, clamped to 0.1–15 m (the length over which `SLOPE_NOISE_M` sets its uncertainty).
 fn end_slope(so: &[[f64; 2]], at_end: bool, span: f64) -> (f64, f64) {
     if so.len() < 2 {
         return (0.0, 0.1);
