@@ -133,7 +133,7 @@ pub fn summary_line(ex: &Extraction, stats: &RunStats, output: &Path) -> String 
 pub fn run(args: Args) -> anyhow::Result<()> {
     // Parameters first: a typo must not cost a pipeline run.
     let params = load_params(args.params.as_deref())?;
-    check_classifier(&params, &mut std::io::stderr())?;
+    check_classifier(&params)?;
     if let Some(dir) = args.output.parent().filter(|d| !d.as_os_str().is_empty())
         && !dir.is_dir()
     {
@@ -161,9 +161,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
 /// The learned classifier, loaded before any point is read: with `learned.mode` `on` a
 /// missing ONNX Runtime (or a model it cannot run) is an error; with `auto` the run goes on
-/// with the geometric classes alone (no arrows, no diamonds), and says so on `warn` with
+/// with the geometric classes alone (no arrows, no diamonds), and says so on stderr with
 /// the install hint, instead of only in a log nobody reads from the command line.
-fn check_classifier(params: &ValidParams, warn: &mut dyn std::io::Write) -> anyhow::Result<()> {
+fn check_classifier(params: &ValidParams) -> anyhow::Result<()> {
     let mode = params.learned.mode;
     if mode == Mode::Off {
         return Ok(());
@@ -172,12 +172,11 @@ fn check_classifier(params: &ValidParams, warn: &mut dyn std::io::Write) -> anyh
         Ok(_) => Ok(()),
         Err(e) if mode == Mode::On => Err(e).context("learned.mode is \"on\""),
         Err(e) => {
-            writeln!(
-                warn,
+            eprintln!(
                 "roadmark: warning: the learned marking classifier is off for this run, so \
                  arrows and diamonds stay `unknown` ({e}); set learned.mode to \"off\" to \
                  silence this or to \"on\" to make it an error"
-            )?;
+            );
             Ok(())
         }
     }

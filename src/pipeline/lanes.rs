@@ -346,13 +346,14 @@ fn end_slope(so: &[[f64; 2]], at_end: bool, span: f64) -> (f64, f64) {
     if so.len() < 2 {
         return (0.0, 0.1);
     }
-    let window = |w: f64| -> Vec<[f64; 2]> {
+    // The samples within `w` of the end: a suffix (prefix) of the sorted samples.
+    let window = |w: f64| -> &[[f64; 2]] {
         if at_end {
             let lim = so[so.len() - 1][0] - w;
-            so.iter().copied().filter(|q| q[0] >= lim).collect()
+            &so[so.partition_point(|q| q[0] < lim)..]
         } else {
             let lim = so[0][0] + w;
-            so.iter().copied().filter(|q| q[0] <= lim).collect()
+            &so[..so.partition_point(|q| q[0] <= lim)]
         }
     };
     let ext = |p: &[[f64; 2]]| p[p.len() - 1][0] - p[0][0];
@@ -360,13 +361,13 @@ fn end_slope(so: &[[f64; 2]], at_end: bool, span: f64) -> (f64, f64) {
     // A sparse chain's last `span` metres may hold one short fragment: the window widens
     // (to at most 4 × `span`) until its samples extend over `END_FIT_MIN_M`.
     for k in 2..=4 {
-        if ext(&pick) >= END_FIT_MIN_M {
+        if ext(pick) >= END_FIT_MIN_M {
             break;
         }
         pick = window(span * k as f64);
     }
-    let extent = ext(&pick).clamp(0.1, 15.0);
-    (geom::ls_slope(&pick).map_or(0.0, |k| k.clamp(-0.5, 0.5)), extent)
+    let extent = ext(pick).clamp(0.1, 15.0);
+    (geom::ls_slope(pick).map_or(0.0, |k| k.clamp(-0.5, 0.5)), extent)
 }
 
 fn seg_of(items: &[Item], members: Vec<usize>) -> Seg {
