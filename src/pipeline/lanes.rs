@@ -40,6 +40,11 @@
 //!    long drive a far line's dashes can go unseen for a hundred metres. Two solid
 //!    stretches (painted over 70 % of their length) never link so across bare asphalt seen
 //!    on the gap's course: the line breaks there (a ramp's mouth, a lane drop).
+//!    Last, fragments (`unknown` pieces and pieces read narrower than any painted line,
+//!    whose own directions are off by up to 13°) that no established line took join the
+//!    line whose course, extrapolated from its last ≥ 10 m, passes within the lateral
+//!    tolerance of their centres, up to 6 m past its end, one at a time
+//!    (`absorb_fragments`): a ramp's edge line diverging 13–17 m out.
 //! 3. **Dashed or solid**, judged on the named pieces only: `unknown` line fragments
 //!    (neutral pieces: a far line's dash seen in part, shorter than any dash, looks the
 //!    same on a solid line) are linked like the others but join the stretch nearest to
@@ -343,8 +348,15 @@ fn slope_noise(s: &Seg) -> f64 {
 /// or end (further, see below), and the along-track extent of the samples it was fitted
 /// on, clamped to 0.1–15 m (the length over which `SLOPE_NOISE_M` sets its uncertainty).
 fn end_slope(so: &[[f64; 2]], at_end: bool, span: f64) -> (f64, f64) {
+    let (slope, extent, _) = end_fit(so, at_end, span);
+    (slope, extent)
+}
+
+/// [`end_slope`], and the centroid of the samples it was fitted on (the fitted line
+/// passes through it).
+fn end_fit(so: &[[f64; 2]], at_end: bool, span: f64) -> (f64, f64, [f64; 2]) {
     if so.len() < 2 {
-        return (0.0, 0.1);
+        return (0.0, 0.1, so.first().copied().unwrap_or([0.0, 0.0]));
     }
     // The samples within `w` of the end: a suffix (prefix) of the sorted samples.
     let window = |w: f64| -> &[[f64; 2]] {
@@ -367,7 +379,16 @@ fn end_slope(so: &[[f64; 2]], at_end: bool, span: f64) -> (f64, f64) {
         pick = window(span * k as f64);
     }
     let extent = ext(pick).clamp(0.1, 15.0);
-    (geom::ls_slope(pick).map_or(0.0, |k| k.clamp(-0.5, 0.5)), extent)
+    let n = pick.len() as f64;
+    let centroid = [
+        pick.iter().map(|q| q[0]).sum::<f64>() / n,
+        pick.iter().map(|q| q[1]).sum::<f64>() / n,
+    ];
+    (
+        geom::ls_slope(pick).map_or(0.0, |k| k.clamp(-0.5, 0.5)),
+        extent,
+        centroid,
+    )
 }
 
 fn seg_of(items: &[Item], members: Vec<usize>) -> Seg {
@@ -629,6 +650,7 @@ pub fn grow_with_barriers(
         .map(|c| c.into_iter().flat_map(|s| segs2[s].members.clone()).collect())
         .collect();
     let chains = merge_parallel_chains(&items, chains);
+    let chains = absorb_fragments(&items, chains, p, &boxes);
     let mut out = Lanes::default();
     for mut chain in chains {
         chain.sort_by(|&a, &b| items[a].so[0][0].total_cmp(&items[b].so[0][0]).then(a.cmp(&b)));
@@ -719,6 +741,148 @@ fn merge_parallel_chains(items: &[Item], chains: Vec<Vec<usize>>) -> Vec<Vec<usi
     let mut sorted = pooled;
     sorted.sort_by(|a, b| a.so[0][0].total_cmp(&b.so[0][0]).then(a.keys.cmp(&b.keys)));
     merge_overlaps(sorted).into_iter().map(|m| m.keys).collect()
+}
+
+/// Longest gap (m) from a line's end to an `unknown` fragment that [`absorb_fragments`]
+/// joins to it: the fragments of a far line lie 0.3–4 m apart, and one bare gap of a 6/9 m
+/// dashed line is 9 m (a fragment beyond it is evidence of the next dash, not of the gap).
+const FRAGMENT_MAX_GAP_M: f64 = 6.0;
+
+/// `unknown` fragments (neutral items) just past the end of an established line that lie
+/// on its course join it, one at a time, each extending the line and refitting its end.
+///
+/// The far line a ramp diverges along is crossed by a few scan rows every metre: its
+/// fragments are 1 m long, 2–5 cm wide, and their own directions are off by up to 13°
+/// (one crossing row decides them), so the pairwise links, which compare directions, stop
+/// at the first one (highway drives: the ramp's edge line lost its last 25 m as eight to
+/// ten `unknown` pieces). Here a fragment's direction is not used at all: only its centre,
+/// against the course extrapolated from the line's last ≥ 10 m (`end_fit`), within the
+/// lateral tolerance of the gap, no further than [`FRAGMENT_MAX_GAP_M`], and not across a
+/// barrier. An established line is a chain at least [`CHAIN_MIN_SPAN_M`] long with at
+/// least one named piece; the fragments come from chains that are not. Where two line ends
+/// claim one fragment, the nearer course takes it.
+///
+/// Written here: it is the self-growth step of Yao 2021 §2.3 on centres alone.
+fn absorb_fragments(
+    items: &[Item],
+    mut chains: Vec<Vec<usize>>,
+    p: &Params,
+    barriers: &[[f64; 4]],
+) -> Vec<Vec<usize>> {
+    let start_of = |c: &[usize]| c.iter().map(|&m| items[m].ends().0).fold(f64::INFINITY, f64::min);
+    // A fragment: an `unknown` piece, or one read narrower than any painted line (a far
+    // line crossed by one scan row), whose direction its outline does not fix.
+    let fragment = |m: usize| items[m].neutral || items[m].width < MIN_PAINT_WIDTH_M;
+    let anchor: Vec<bool> = chains
+        .iter()
+        .map(|c| end_of(items, c) - start_of(c) >= CHAIN_MIN_SPAN_M && c.iter().any(|&m| !fragment(m)))
+        .collect();
+    // Candidate fragments: neutral items of the other chains, with their centres.
+    let mut free: Vec<(usize, [f64; 2])> = chains
+        .iter()
+        .zip(&anchor)
+        .filter(|(_, a)| !**a)
+        .flat_map(|(c, _)| c.iter().copied())
+        .filter(|&m| fragment(m))
+        .map(|m| {
+            let so = &items[m].so;
+            let n = so.len() as f64;
+            (
+                m,
+                [
+                    so.iter().map(|q| q[0]).sum::<f64>() / n,
+                    so.iter().map(|q| q[1]).sum::<f64>() / n,
+                ],
+            )
+        })
+        .collect();
+    free.sort_by(|a, b| a.1[0].total_cmp(&b.1[0]));
+    if free.is_empty() {
+        return chains;
+    }
+    let mut taken = vec![false; items.len()];
+    let mut any = false;
+    loop {
+        // Each anchor end's nearest fragment on its course: (dev / tol, chain, item).
+        let mut claims: Vec<(f64, usize, usize)> = Vec::new();
+        for (ci, c) in chains.iter().enumerate().filter(|(ci, _)| anchor[*ci]) {
+            let mut so: Vec<[f64; 2]> = c.iter().flat_map(|&m| items[m].so.iter().copied()).collect();
+            so.sort_by(|a, b| a[0].total_cmp(&b[0]));
+            for at_end in [false, true] {
+                let (slope, _, cen) = end_fit(&so, at_end, 15.0);
+                let end = if at_end { so[so.len() - 1][0] } else { so[0][0] };
+                let (lo, hi) = if at_end {
+                    (end - 0.5, end + FRAGMENT_MAX_GAP_M + 5.0)
+                } else {
+                    (end - FRAGMENT_MAX_GAP_M - 5.0, end + 0.5)
+                };
+                let from = free.partition_point(|f| f.1[0] < lo);
+                let mut best: Option<(f64, f64, usize)> = None;
+                for &(m, ctr) in free[from..].iter().take_while(|f| f.1[0] <= hi) {
+                    if taken[m] {
+                        continue;
+                    }
+                    let (f0, f1) = items[m].ends();
+                    let beyond = if at_end { f1 > end } else { f0 < end };
+                    let g = if at_end { f0 - end } else { end - f1 };
+                    if !beyond || !(-0.5..=FRAGMENT_MAX_GAP_M).contains(&g) {
+                        continue;
+                    }
+                    let pred = cen[1] + slope * (ctr[0] - cen[0]);
+                    let tol = p.lateral_tolerance_m + p.lateral_tolerance_per_m * g.max(0.0);
+                    let dev = (ctr[1] - pred).abs();
+                    if dev > tol {
+                        continue;
+                    }
+                    let (gs0, gs1) = if at_end { (end, f0) } else { (f1, end) };
+                    if barriers
+                        .iter()
+                        .any(|b| b[0] < gs1 - 0.1 && b[1] > gs0 + 0.1 && pred >= b[2] && pred <= b[3])
+                    {
+                        continue;
+                    }
+                    if best.is_none_or(|(bg, _, _)| g < bg) {
+                        best = Some((g, dev / tol, m));
+                    }
+                }
+                if let Some((_, r, m)) = best {
+                    claims.push((r, ci, m));
+                }
+            }
+        }
+        claims.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+        let mut grew = vec![false; chains.len()];
+        let mut progress = false;
+        for (_, ci, m) in claims {
+            // One fragment per line per round: its end is refitted before the next.
+            if taken[m] || grew[ci] {
+                continue;
+            }
+            taken[m] = true;
+            grew[ci] = true;
+            chains[ci].push(m);
+            progress = true;
+        }
+        if !progress {
+            break;
+        }
+        any = true;
+    }
+    if !any {
+        return chains;
+    }
+    chains
+        .into_iter()
+        .zip(anchor)
+        .filter_map(|(c, a)| {
+            let c: Vec<usize> = if a {
+                c
+            } else {
+                c.into_iter().filter(|&m| !taken[m]).collect()
+            };
+            (!c.is_empty()).then_some(c)
+        })
+        .collect()
 }
 
 /// Largest offset difference at which overlapping pieces or chains are one line (m): less
@@ -1841,6 +2005,60 @@ mod tests {
         let lanes = grow(&pieces, &t, &p);
         let pieces_per_line: Vec<usize> = lanes.lines.iter().map(|l| l.pieces.len()).collect();
         assert_eq!(pieces_per_line, vec![5]);
+    }
+
+    /// A ramp's edge line diverging at 8.5° (do/ds −0.15), its last 20 m seen as 1 m
+    /// fragments 3 cm wide every 2 m, the asphalt between them unseen (highway drives,
+    /// 13–17 m out), each pointing 8.5–13° off the line's course (flat or do/ds +0.09): all
+    /// of them join the line, by their centres, and none joins across a crosswalk ahead or
+    /// from 0.4 m off course.
+    #[test]
+    fn a_diverging_line_takes_its_fragments_whatever_their_direction() {
+        let p = Params::default();
+        let course = |x: f64| 3.5 - 0.15 * x;
+        let seen = crate::pipeline::observed::test_seen_where(&traj(), |x, y| {
+            x > 30.0 && (y - course(x)).abs() < 0.3
+        });
+        let grow = |pieces: &[LanePiece], barriers: &[Vec<[f64; 2]>]| {
+            grow_with_barriers(pieces, &traj(), &p, barriers, Some(&seen.lookup()))
+        };
+        let mut pieces = vec![LanePiece {
+            centerline: vec![[0.0, course(0.0)], [30.0, course(30.0)]],
+            ..piece(0, 0.0, 30.0, MarkingClass::SolidLine)
+        }];
+        for k in 0..10 {
+            let c = 31.5 + 2.0 * k as f64;
+            let slope = if k % 2 == 0 { 0.0 } else { 0.09 };
+            let class = if k % 3 == 0 {
+                MarkingClass::Unknown
+            } else {
+                MarkingClass::DashedLine
+            };
+            pieces.push(LanePiece {
+                centerline: vec![
+                    [c - 0.5, course(c) - 0.5 * slope],
+                    [c + 0.5, course(c) + 0.5 * slope],
+                ],
+                width_m: 0.03,
+                ..piece(1 + k, c - 0.5, c + 0.5, class)
+            });
+        }
+        let lanes = grow(&pieces, &[]);
+        assert_eq!(lanes.lines.len(), 1, "{:?}", lanes.lines);
+        let line = &lanes.lines[0];
+        assert_eq!(line.pieces, (0..11).collect::<Vec<_>>());
+        assert_eq!(line.class, LaneLineClass::SolidLine);
+        let end = line.line[line.line.len() - 1];
+        assert!(end[0] > 49.5 && (end[1] - course(end[0])).abs() < 0.1, "{end:?}");
+        // A fragment 0.4 m off the course stays out.
+        let mut off = pieces.clone();
+        off[10].centerline.iter_mut().for_each(|v| v[1] += 0.4);
+        let lanes = grow(&off, &[]);
+        assert_eq!(lanes.lines[0].pieces, (0..10).collect::<Vec<_>>());
+        // A crosswalk across the course at x 36-39 stops the growth there.
+        let zebra = vec![vec![[36.0, -10.0], [39.0, -10.0], [39.0, 10.0], [36.0, 10.0]]];
+        let lanes = grow(&pieces, &zebra);
+        assert_eq!(lanes.lines[0].pieces, (0..4).collect::<Vec<_>>());
     }
 
     /// A far 2/4 m dashed line (urban drive s2, offset 12.8 m) seen as one dash in 1–4,

@@ -229,11 +229,18 @@ impl Lookup<'_> {
 /// 0.1 × 0.05 m), except on the course at `y` (±0.1 m) where `hidden(x)`.
 #[cfg(test)]
 pub(crate) fn test_seen_except(t: &Trajectory, y: f64, hidden: impl Fn(f64) -> bool) -> Observed {
+    test_seen_where(t, |px, py| (py - y).abs() < 0.1 && hidden(px))
+}
+
+/// Test record: pavement seen dark everywhere over x −20..80, |y| ≤ 5 (points every
+/// 0.1 × 0.05 m), except where `hidden(x, y)`.
+#[cfg(test)]
+pub(crate) fn test_seen_where(t: &Trajectory, hidden: impl Fn(f64, f64) -> bool) -> Observed {
     let (mut m, mut o) = (Vec::new(), Vec::new());
     for i in 0..1000 {
         for j in -100..=100 {
             let (px, py) = (-20.0 + i as f64 * 0.1 + 0.05, j as f64 * 0.05);
-            if (py - y).abs() < 0.1 && hidden(px) {
+            if hidden(px, py) {
                 continue;
             }
             let st = t.locate(px, py);
