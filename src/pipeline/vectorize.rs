@@ -1105,9 +1105,10 @@ const FRAGMENT_PARALLEL_M: f64 = 0.5;
 const FRAGMENT_LINE_SMOOTHING_M: f64 = 25.0;
 /// Confidence of a lane line of fragments.
 const FRAGMENT_CONFIDENCE_LINE: f64 = 0.4;
-/// Longest gap (m) between consecutive pieces of a line of fragments (two 15 m periods of
-/// a highway dashed line with a dash unseen).
-const FRAGMENT_LINE_MAX_GAP_M: f64 = 40.0;
+/// Longest gap (m) between consecutive pieces of a line of fragments: three 15 m periods of
+/// a highway dashed line with two dashes unseen (highway s1001: 44 m between the fragments
+/// of the far line's 60 m start and the rest, which at 40 m lost that start).
+const FRAGMENT_LINE_MAX_GAP_M: f64 = 50.0;
 /// Widest dashes (m) of a design a line of fragments may take.
 const FRAGMENT_DESIGN_MAX_WIDTH_M: f64 = 0.3;
 /// Offset difference (m) allowed between consecutive pieces of a line of fragments, plus
@@ -2583,6 +2584,29 @@ mod tests {
                 .iter()
                 .all(|l| l.line.iter().all(|q| (q[1] - 18.0).abs() > 0.5))
         );
+    }
+
+    /// A far line seen as one fragment per 6/9 m dash, two dashes in a row unseen after the
+    /// fourth (44 m from fragment to fragment): one lane line over all of it, not a line
+    /// from the fifth fragment on with the first four dropped.
+    #[test]
+    fn a_far_line_of_fragments_spans_two_unseen_dashes() {
+        let traj = crate::pipeline::types::test_straight_trajectory(300, -20.0);
+        let mut pieces = near_dashed_lines();
+        let inside = [
+            0.2, 2.5, 5.0, 1.0, 4.2, 3.3, 0.6, 5.2, 2.0, 3.9, 1.5, 4.8, 0.9, 2.8, 5.3, 1.8,
+        ];
+        for (k, &at) in inside.iter().enumerate().filter(|(k, _)| !(4..6).contains(k)) {
+            pieces.push(fragment(3.0 + 15.0 * k as f64 + at, 22.75));
+        }
+        let (_, lines) = assemble(pieces, &traj, &Params::default(), None);
+        let far: Vec<&LaneLine> = lines
+            .iter()
+            .filter(|l| l.line.iter().all(|q| (q[1] - 22.75).abs() < 0.1))
+            .collect();
+        assert_eq!(far.len(), 1, "{far:?}");
+        let start = far[0].line.iter().map(|q| q[0]).fold(f64::INFINITY, f64::min);
+        assert!(start < 6.0, "the far line starts at {start}");
     }
 
     /// A far line's fragments scatter a few decimetres about its axis (one per dash here),
