@@ -743,13 +743,13 @@ fn merge_parallel_chains(items: &[Item], chains: Vec<Vec<usize>>) -> Vec<Vec<usi
     merge_overlaps(sorted).into_iter().map(|m| m.keys).collect()
 }
 
-/// Longest gap (m) from a line's end to an `unknown` fragment that [`absorb_fragments`]
-/// joins to it: the fragments of a far line lie 0.3–4 m apart, and one bare gap of a 6/9 m
+/// Longest gap (m) from a line's end to a fragment that [`absorb_fragments`] joins to it: the fragments of a far line lie 0.3–4 m apart, and one bare gap of a 6/9 m
 /// dashed line is 9 m (a fragment beyond it is evidence of the next dash, not of the gap).
 const FRAGMENT_MAX_GAP_M: f64 = 6.0;
 
-/// `unknown` fragments (neutral items) just past the end of an established line that lie
-/// on its course join it, one at a time, each extending the line and refitting its end.
+/// Fragments (`unknown` pieces, and pieces read narrower than any painted line, 0.10 m)
+/// just past the end of an established line that lie on its course join it, one at a time,
+/// each extending the line and refitting its end.
 ///
 /// The far line a ramp diverges along is crossed by a few scan rows every metre: its
 /// fragments are 1 m long, 2–5 cm wide, and their own directions are off by up to 13°
@@ -759,7 +759,8 @@ const FRAGMENT_MAX_GAP_M: f64 = 6.0;
 /// against the course extrapolated from the line's last ≥ 10 m (`end_fit`), within the
 /// lateral tolerance of the gap, no further than [`FRAGMENT_MAX_GAP_M`], and not across a
 /// barrier. An established line is a chain at least [`CHAIN_MIN_SPAN_M`] long with at
-/// least one named piece; the fragments come from chains that are not. Where two line ends
+/// least one piece that is no fragment; the fragments come from chains that are not (a
+/// wrong chain of three fragments is no line). Where two line ends
 /// claim one fragment, the nearer course takes it.
 ///
 /// Written here: it is the self-growth step of Yao 2021 §2.3 on centres alone.
@@ -777,7 +778,7 @@ fn absorb_fragments(
         .iter()
         .map(|c| end_of(items, c) - start_of(c) >= CHAIN_MIN_SPAN_M && c.iter().any(|&m| !fragment(m)))
         .collect();
-    // Candidate fragments: neutral items of the other chains, with their centres.
+    // Candidate fragments: the fragments of the other chains, with their centres.
     let mut free: Vec<(usize, [f64; 2])> = chains
         .iter()
         .zip(&anchor)
