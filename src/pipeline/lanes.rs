@@ -869,6 +869,48 @@ fn absorb_fragments(
         }
         any = true;
     }
+    // Fragments within the span of a solid line (painted over SOLID_SHARE of it), on its
+    // course (its samples' median offset there, interpolated across its gaps) within
+    // MAX_MERGE_OFFSET_M, are its pieces: a fragment pointing off the course in a gap the
+    // line bridged. Not on dashed lines: a fragment in a dash gap is no paint of the line,
+    // and one beside a dash made the dash's outline worse (MUTCD urban: 2 dashes fewer).
+    let pooled: Vec<Option<Vec<[f64; 2]>>> = chains
+        .iter()
+        .zip(&anchor)
+        .map(|(c, &a)| {
+            let painted: f64 = c.iter().map(|&m| items[m].ends().1 - items[m].ends().0).sum();
+            let solid = painted >= SOLID_SHARE * (end_of(items, c) - start_of(c));
+            (a && solid).then(|| {
+                let mut so: Vec<[f64; 2]> = c.iter().flat_map(|&m| items[m].so.iter().copied()).collect();
+                so.sort_by(|x, y| x[0].total_cmp(&y[0]));
+                so
+            })
+        })
+        .collect();
+    for &(m, ctr) in &free {
+        if taken[m] {
+            continue;
+        }
+        let (f0, f1) = items[m].ends();
+        let best = pooled
+            .iter()
+            .enumerate()
+            .filter_map(|(ci, so)| {
+                let so = so.as_ref()?;
+                if so[0][0] > f0 || so[so.len() - 1][0] < f1 {
+                    return None;
+                }
+                let o = median_offset_in(so, f0, f1)?;
+                let dev = (o - ctr[1]).abs();
+                (dev <= MAX_MERGE_OFFSET_M).then_some((dev, ci))
+            })
+            .min_by(|a, b| a.0.total_cmp(&b.0));
+        if let Some((_, ci)) = best {
+            taken[m] = true;
+            chains[ci].push(m);
+            any = true;
+        }
+    }
     if !any {
         return chains;
     }
@@ -2060,6 +2102,49 @@ mod tests {
         let zebra = vec![vec![[36.0, -10.0], [39.0, -10.0], [39.0, 10.0], [36.0, 10.0]]];
         let lanes = grow(&pieces, &zebra);
         assert_eq!(lanes.lines[0].pieces, (0..4).collect::<Vec<_>>());
+    }
+
+    /// A diverging line's fragments, a 1 m one beside a 3 m one, 0.1 m apart across (too far
+    /// for the two to be one piece): growing the line's end takes the 3 m one, and the other,
+    /// now behind the end, joins as a piece within the line's span (highway s1001: five
+    /// fragments of the ramp's edge line). 0.3 m off the course it does not.
+    #[test]
+    fn a_fragment_beside_one_the_line_took_joins_it_too() {
+        let p = Params::default();
+        let course = |x: f64| 3.5 - 0.15 * x;
+        let seen = crate::pipeline::observed::test_seen_where(&traj(), |x, y| {
+            x > 30.0 && (y - course(x)).abs() < 0.3
+        });
+        let frag = |key: usize, x0: f64, x1: f64, off: f64| {
+            let c = 0.5 * (x0 + x1);
+            LanePiece {
+                centerline: vec![[x0, course(c) + off], [x1, course(c) + off]],
+                width_m: 0.03,
+                ..piece(key, x0, x1, MarkingClass::Unknown)
+            }
+        };
+        let pieces = |off: f64| {
+            let mut v = vec![LanePiece {
+                centerline: vec![[0.0, course(0.0)], [30.0, course(30.0)]],
+                ..piece(0, 0.0, 30.0, MarkingClass::SolidLine)
+            }];
+            v.extend([
+                frag(1, 31.0, 34.0, 0.0),
+                frag(2, 31.8, 32.8, off),
+                frag(3, 35.0, 36.0, 0.0),
+                frag(4, 37.0, 38.0, 0.0),
+            ]);
+            v
+        };
+        let keys = |off: f64| -> Vec<Vec<usize>> {
+            grow_with_barriers(&pieces(off), &traj(), &p, &[], Some(&seen.lookup()))
+                .lines
+                .iter()
+                .map(|l| l.pieces.clone())
+                .collect()
+        };
+        assert_eq!(keys(0.1), vec![vec![0, 1, 2, 3, 4]]);
+        assert_eq!(keys(0.3), vec![vec![0, 1, 3, 4]]);
     }
 
     /// A far 2/4 m dashed line (urban drive s2, offset 12.8 m) seen as one dash in 1–4,
