@@ -44,7 +44,8 @@
 //!    whose own directions are off by up to 13°) that no established line took join the
 //!    line whose course, extrapolated from its last ≥ 10 m, passes within the lateral
 //!    tolerance of their centres, up to 6 m past its end, one at a time
-//!    (`absorb_fragments`): a ramp's edge line diverging 13–17 m out.
+//!    (`absorb_fragments`): a ramp's edge line diverging 13–17 m out. Fragments left
+//!    within a solid line's span, within 0.18 m of its course, join it too.
 //! 3. **Dashed or solid**, judged on the named pieces only: `unknown` line fragments
 //!    (neutral pieces: a far line's dash seen in part, shorter than any dash, looks the
 //!    same on a solid line) are linked like the others but join the stretch nearest to
@@ -761,7 +762,8 @@ const FRAGMENT_MAX_GAP_M: f64 = 6.0;
 /// barrier. An established line is a chain at least [`CHAIN_MIN_SPAN_M`] long with at
 /// least one piece that is no fragment; the fragments come from chains that are not (a
 /// wrong chain of three fragments is no line). Where two line ends
-/// claim one fragment, the nearer course takes it.
+/// claim one fragment, the nearer course takes it. Then the fragments left within the
+/// span of a solid line, within [`MAX_MERGE_OFFSET_M`] of its course, join it (see below).
 ///
 /// Written here: it is the self-growth step of Yao 2021 §2.3 on centres alone.
 fn absorb_fragments(
