@@ -380,24 +380,15 @@ fn end_fit(so: &[[f64; 2]], at_end: bool, span: f64) -> (f64, f64, [f64; 2]) {
         pick = window(span * k as f64);
     }
     let extent = ext(pick).clamp(0.1, 15.0);
-    let n = pick.len() as f64;
-    let centroid = [
-        pick.iter().map(|q| q[0]).sum::<f64>() / n,
-        pick.iter().map(|q| q[1]).sum::<f64>() / n,
-    ];
     (
         geom::ls_slope(pick).map_or(0.0, |k| k.clamp(-0.5, 0.5)),
         extent,
-        centroid,
+        mean_of(pick),
     )
 }
 
 fn seg_of(items: &[Item], members: Vec<usize>) -> Seg {
-    let mut so: Vec<[f64; 2]> = members
-        .iter()
-        .flat_map(|&m| items[m].so.iter().copied())
-        .collect();
-    so.sort_by(|a, b| a[0].total_cmp(&b[0]));
+    let so = samples_of(items, &members);
     let w = members.iter().map(|&m| items[m].width).sum::<f64>() / members.len() as f64;
     let ((slope0, fit0), (slope1, fit1)) = (end_slope(&so, false, 15.0), end_slope(&so, true, 15.0));
     Seg {
@@ -410,10 +401,7 @@ fn seg_of(items: &[Item], members: Vec<usize>) -> Seg {
         fit0,
         fit1,
         width: w,
-        painted: members
-            .iter()
-            .map(|&m| items[m].so[items[m].so.len() - 1][0] - items[m].so[0][0])
-            .sum(),
+        painted: painted_of(items, &members),
         members,
     }
 }
@@ -493,20 +481,15 @@ fn link(
                 }
                 dev = dev.min(flat);
             }
-            // Widths compared with 5 cm added: sparse far-range pieces under-read their
-            // width by about a point spacing, which must not break a line.
             // A barrier inside the gap (overlapping it by ≥ 0.1 m) at the line's offset.
-            let (gs0, gs1) = (sa.s1, sb.s0);
-            let om = 0.5 * (pa + pb);
-            if barriers
-                .iter()
-                .any(|b| b[0] < gs1 - 0.1 && b[1] > gs0 + 0.1 && om >= b[2] && om <= b[3])
-            {
+            if barrier_across(barriers, sa.s1, sb.s0, 0.5 * (pa + pb)) {
                 continue;
             }
-            // A width under the narrowest painted line is a sparse piece's under-reading
-            // (a far line's fragment crossed by one scan row reads 3 cm) and compares as
-            // that narrowest line.
+            // Widths compared with 5 cm added: sparse far-range pieces under-read their
+            // width by about a point spacing, which must not break a line. A width under
+            // the narrowest painted line is a sparse piece's under-reading (a far line's
+            // fragment crossed by one scan row reads 3 cm) and compares as that narrowest
+            // line.
             let (wa, wb) = (sa.width.max(MIN_PAINT_WIDTH_M), sb.width.max(MIN_PAINT_WIDTH_M));
             if wa.min(wb) + 0.05 < p.min_width_similarity * (wa.max(wb) + 0.05) {
                 continue;
@@ -670,10 +653,7 @@ pub fn grow_with_barriers(
             if !long_enough || (named == 1 && class != LaneLineClass::SolidLine) {
                 continue;
             }
-            let painted: f64 = members
-                .iter()
-                .map(|&m| items[m].so[items[m].so.len() - 1][0] - items[m].so[0][0])
-                .sum();
+            let painted = painted_of(&items, &members);
             let scant_solid = class == LaneLineClass::SolidLine
                 && named <= SCANT_SOLID_MAX_PIECES
                 && painted < p.scant_solid_paint_m;
@@ -726,16 +706,12 @@ pub fn grow_with_barriers(
 fn merge_parallel_chains(items: &[Item], chains: Vec<Vec<usize>>) -> Vec<Vec<usize>> {
     let pooled: Vec<Item> = chains
         .iter()
-        .map(|c| {
-            let mut so: Vec<[f64; 2]> = c.iter().flat_map(|&m| items[m].so.iter().copied()).collect();
-            so.sort_by(|a, b| a[0].total_cmp(&b[0]));
-            Item {
-                keys: c.clone(),
-                so,
-                width: c.iter().map(|&m| items[m].width).fold(0.0, f64::max),
-                conf: 0.0,
-                neutral: c.iter().all(|&m| items[m].neutral),
-            }
+        .map(|c| Item {
+            keys: c.clone(),
+            so: samples_of(items, c),
+            width: c.iter().map(|&m| items[m].width).fold(0.0, f64::max),
+            conf: 0.0,
+            neutral: c.iter().all(|&m| items[m].neutral),
         })
         .collect();
     // `merge_overlaps` sorts by start and concatenates `keys`, here the item indices.
@@ -744,8 +720,9 @@ fn merge_parallel_chains(items: &[Item], chains: Vec<Vec<usize>>) -> Vec<Vec<usi
     merge_overlaps(sorted).into_iter().map(|m| m.keys).collect()
 }
 
-/// Longest gap (m) from a line's end to a fragment that [`absorb_fragments`] joins to it: the fragments of a far line lie 0.3–4 m apart, and one bare gap of a 6/9 m
-/// dashed line is 9 m (a fragment beyond it is evidence of the next dash, not of the gap).
+/// Longest gap (m) from a line's end to a fragment that [`absorb_fragments`] joins to it:
+/// the fragments of a far line lie 0.3–4 m apart, and one bare gap of a 6/9 m dashed line
+/// is 9 m (a fragment beyond it is evidence of the next dash, not of the gap).
 const FRAGMENT_MAX_GAP_M: f64 = 6.0;
 
 /// Fragments (`unknown` pieces, and pieces read narrower than any painted line, 0.10 m)
@@ -772,13 +749,12 @@ fn absorb_fragments(
     p: &Params,
     barriers: &[[f64; 4]],
 ) -> Vec<Vec<usize>> {
-    let start_of = |c: &[usize]| c.iter().map(|&m| items[m].ends().0).fold(f64::INFINITY, f64::min);
     // A fragment: an `unknown` piece, or one read narrower than any painted line (a far
     // line crossed by one scan row), whose direction its outline does not fix.
     let fragment = |m: usize| items[m].neutral || items[m].width < MIN_PAINT_WIDTH_M;
     let anchor: Vec<bool> = chains
         .iter()
-        .map(|c| end_of(items, c) - start_of(c) >= CHAIN_MIN_SPAN_M && c.iter().any(|&m| !fragment(m)))
+        .map(|c| end_of(items, c) - start_of(items, c) >= CHAIN_MIN_SPAN_M && c.iter().any(|&m| !fragment(m)))
         .collect();
     // Candidate fragments: the fragments of the other chains, with their centres.
     let mut free: Vec<(usize, [f64; 2])> = chains
@@ -787,33 +763,28 @@ fn absorb_fragments(
         .filter(|(_, a)| !**a)
         .flat_map(|(c, _)| c.iter().copied())
         .filter(|&m| fragment(m))
-        .map(|m| {
-            let so = &items[m].so;
-            let n = so.len() as f64;
-            (
-                m,
-                [
-                    so.iter().map(|q| q[0]).sum::<f64>() / n,
-                    so.iter().map(|q| q[1]).sum::<f64>() / n,
-                ],
-            )
-        })
+        .map(|m| (m, mean_of(&items[m].so)))
         .collect();
-    free.sort_by(|a, b| a.1[0].total_cmp(&b.1[0]));
     if free.is_empty() {
         return chains;
     }
+    free.sort_by(|a, b| a.1[0].total_cmp(&b.1[0]));
+    // The anchors' pooled samples, kept up to date as they grow.
+    let mut samples: Vec<Option<Vec<[f64; 2]>>> = chains
+        .iter()
+        .zip(&anchor)
+        .map(|(c, &a)| a.then(|| samples_of(items, c)))
+        .collect();
     let mut taken = vec![false; items.len()];
-    let mut any = false;
     loop {
         // Each anchor end's nearest fragment on its course: (dev / tol, chain, item).
         let mut claims: Vec<(f64, usize, usize)> = Vec::new();
-        for (ci, c) in chains.iter().enumerate().filter(|(ci, _)| anchor[*ci]) {
-            let mut so: Vec<[f64; 2]> = c.iter().flat_map(|&m| items[m].so.iter().copied()).collect();
-            so.sort_by(|a, b| a[0].total_cmp(&b[0]));
+        for (ci, so) in samples.iter().enumerate() {
+            let Some(so) = so else { continue };
             for at_end in [false, true] {
-                let (slope, _, cen) = end_fit(&so, at_end, 15.0);
+                let (slope, _, cen) = end_fit(so, at_end, 15.0);
                 let end = if at_end { so[so.len() - 1][0] } else { so[0][0] };
+                // Centres up to 5 m beyond the farthest start or end (fragments up to 10 m).
                 let (lo, hi) = if at_end {
                     (end - 0.5, end + FRAGMENT_MAX_GAP_M + 5.0)
                 } else {
@@ -834,14 +805,8 @@ fn absorb_fragments(
                     let pred = cen[1] + slope * (ctr[0] - cen[0]);
                     let tol = p.lateral_tolerance_m + p.lateral_tolerance_per_m * g.max(0.0);
                     let dev = (ctr[1] - pred).abs();
-                    if dev > tol {
-                        continue;
-                    }
                     let (gs0, gs1) = if at_end { (end, f0) } else { (f1, end) };
-                    if barriers
-                        .iter()
-                        .any(|b| b[0] < gs1 - 0.1 && b[1] > gs0 + 0.1 && pred >= b[2] && pred <= b[3])
-                    {
+                    if dev > tol || barrier_across(barriers, gs0, gs1, pred) {
                         continue;
                     }
                     if best.is_none_or(|(bg, _, _)| g < bg) {
@@ -853,48 +818,41 @@ fn absorb_fragments(
                 }
             }
         }
+        if claims.is_empty() {
+            break;
+        }
         claims.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+        // One fragment per line per round: its end is refitted before the next.
         let mut grew = vec![false; chains.len()];
-        let mut progress = false;
         for (_, ci, m) in claims {
-            // One fragment per line per round: its end is refitted before the next.
             if taken[m] || grew[ci] {
                 continue;
             }
             taken[m] = true;
             grew[ci] = true;
             chains[ci].push(m);
-            progress = true;
+            if let Some(so) = samples[ci].as_mut() {
+                so.extend_from_slice(&items[m].so);
+                so.sort_by(|a, b| a[0].total_cmp(&b[0]));
+            }
         }
-        if !progress {
-            break;
-        }
-        any = true;
     }
     // Fragments within the span of a solid line (painted over SOLID_SHARE of it), on its
     // course (its samples' median offset there, interpolated across its gaps) within
     // MAX_MERGE_OFFSET_M, are its pieces: a fragment pointing off the course in a gap the
     // line bridged. Not on dashed lines: a fragment in a dash gap is no paint of the line,
     // and one beside a dash made the dash's outline worse (MUTCD urban: 2 dashes fewer).
-    let pooled: Vec<Option<Vec<[f64; 2]>>> = chains
-        .iter()
-        .zip(&anchor)
-        .map(|(c, &a)| {
-            let painted: f64 = c.iter().map(|&m| items[m].ends().1 - items[m].ends().0).sum();
-            let solid = painted >= SOLID_SHARE * (end_of(items, c) - start_of(c));
-            (a && solid).then(|| {
-                let mut so: Vec<[f64; 2]> = c.iter().flat_map(|&m| items[m].so.iter().copied()).collect();
-                so.sort_by(|x, y| x[0].total_cmp(&y[0]));
-                so
-            })
-        })
-        .collect();
+    for (ci, c) in chains.iter().enumerate() {
+        if painted_of(items, c) < SOLID_SHARE * (end_of(items, c) - start_of(items, c)) {
+            samples[ci] = None;
+        }
+    }
     for &(m, ctr) in &free {
         if taken[m] {
             continue;
         }
         let (f0, f1) = items[m].ends();
-        let best = pooled
+        let best = samples
             .iter()
             .enumerate()
             .filter_map(|(ci, so)| {
@@ -902,19 +860,14 @@ fn absorb_fragments(
                 if so[0][0] > f0 || so[so.len() - 1][0] < f1 {
                     return None;
                 }
-                let o = median_offset_in(so, f0, f1)?;
-                let dev = (o - ctr[1]).abs();
+                let dev = (median_offset_in(so, f0, f1)? - ctr[1]).abs();
                 (dev <= MAX_MERGE_OFFSET_M).then_some((dev, ci))
             })
             .min_by(|a, b| a.0.total_cmp(&b.0));
         if let Some((_, ci)) = best {
             taken[m] = true;
             chains[ci].push(m);
-            any = true;
         }
-    }
-    if !any {
-        return chains;
     }
     chains
         .into_iter()
@@ -1188,6 +1141,52 @@ fn end_of(items: &[Item], members: &[usize]) -> f64 {
         .iter()
         .map(|&m| items[m].ends().1)
         .fold(f64::NEG_INFINITY, f64::max)
+}
+
+/// Smallest start mileage of the members.
+fn start_of(items: &[Item], members: &[usize]) -> f64 {
+    members
+        .iter()
+        .map(|&m| items[m].ends().0)
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// The members' (s, o) samples pooled and sorted by s.
+fn samples_of(items: &[Item], members: &[usize]) -> Vec<[f64; 2]> {
+    let mut so: Vec<[f64; 2]> = members
+        .iter()
+        .flat_map(|&m| items[m].so.iter().copied())
+        .collect();
+    so.sort_by(|a, b| a[0].total_cmp(&b[0]));
+    so
+}
+
+/// Along-track length the members cover (m; overlaps counted twice).
+fn painted_of(items: &[Item], members: &[usize]) -> f64 {
+    members
+        .iter()
+        .map(|&m| {
+            let (a, b) = items[m].ends();
+            b - a
+        })
+        .sum()
+}
+
+/// Mean (s, o) of samples (at least one).
+fn mean_of(so: &[[f64; 2]]) -> [f64; 2] {
+    let n = so.len() as f64;
+    [
+        so.iter().map(|q| q[0]).sum::<f64>() / n,
+        so.iter().map(|q| q[1]).sum::<f64>() / n,
+    ]
+}
+
+/// Whether a barrier box (s0, s1, o0, o1) lies inside the gap from `s0` to `s1` (overlapping
+/// it by at least 0.1 m) at offset `o`.
+fn barrier_across(barriers: &[[f64; 4]], s0: f64, s1: f64, o: f64) -> bool {
+    barriers
+        .iter()
+        .any(|b| b[0] < s1 - 0.1 && b[1] > s0 + 0.1 && o >= b[2] && o <= b[3])
 }
 
 /// Split a chain (pieces in driving order) into solid and dashed stretches, judged on its
@@ -2052,6 +2051,24 @@ mod tests {
         assert_eq!(pieces_per_line, vec![5]);
     }
 
+    /// Course of a ramp's edge line diverging at 8.5° (do/ds −0.15).
+    fn ramp_course(x: f64) -> f64 {
+        3.5 - 0.15 * x
+    }
+
+    /// The ramp's edge line as one solid piece over 0-30 m, and a record of the pavement
+    /// seen everywhere but along its course beyond 30 m.
+    fn ramp() -> (LanePiece, crate::pipeline::observed::Observed) {
+        let line = LanePiece {
+            centerline: vec![[0.0, ramp_course(0.0)], [30.0, ramp_course(30.0)]],
+            ..piece(0, 0.0, 30.0, MarkingClass::SolidLine)
+        };
+        let seen = crate::pipeline::observed::test_seen_where(&traj(), |x, y| {
+            x > 30.0 && (y - ramp_course(x)).abs() < 0.3
+        });
+        (line, seen)
+    }
+
     /// A ramp's edge line diverging at 8.5° (do/ds −0.15), its last 20 m seen as 1 m
     /// fragments 3 cm wide every 2 m, the asphalt between them unseen (highway drives,
     /// 13–17 m out), each pointing 8.5–13° off the line's course (flat or do/ds +0.09): all
@@ -2060,17 +2077,12 @@ mod tests {
     #[test]
     fn a_diverging_line_takes_its_fragments_whatever_their_direction() {
         let p = Params::default();
-        let course = |x: f64| 3.5 - 0.15 * x;
-        let seen = crate::pipeline::observed::test_seen_where(&traj(), |x, y| {
-            x > 30.0 && (y - course(x)).abs() < 0.3
-        });
+        let course = ramp_course;
+        let (line, seen) = ramp();
         let grow = |pieces: &[LanePiece], barriers: &[Vec<[f64; 2]>]| {
             grow_with_barriers(pieces, &traj(), &p, barriers, Some(&seen.lookup()))
         };
-        let mut pieces = vec![LanePiece {
-            centerline: vec![[0.0, course(0.0)], [30.0, course(30.0)]],
-            ..piece(0, 0.0, 30.0, MarkingClass::SolidLine)
-        }];
+        let mut pieces = vec![line];
         for k in 0..10 {
             let c = 31.5 + 2.0 * k as f64;
             let slope = if k % 2 == 0 { 0.0 } else { 0.09 };
@@ -2113,23 +2125,17 @@ mod tests {
     #[test]
     fn a_fragment_beside_one_the_line_took_joins_it_too() {
         let p = Params::default();
-        let course = |x: f64| 3.5 - 0.15 * x;
-        let seen = crate::pipeline::observed::test_seen_where(&traj(), |x, y| {
-            x > 30.0 && (y - course(x)).abs() < 0.3
-        });
+        let (line, seen) = ramp();
         let frag = |key: usize, x0: f64, x1: f64, off: f64| {
             let c = 0.5 * (x0 + x1);
             LanePiece {
-                centerline: vec![[x0, course(c) + off], [x1, course(c) + off]],
+                centerline: vec![[x0, ramp_course(c) + off], [x1, ramp_course(c) + off]],
                 width_m: 0.03,
                 ..piece(key, x0, x1, MarkingClass::Unknown)
             }
         };
         let pieces = |off: f64| {
-            let mut v = vec![LanePiece {
-                centerline: vec![[0.0, course(0.0)], [30.0, course(30.0)]],
-                ..piece(0, 0.0, 30.0, MarkingClass::SolidLine)
-            }];
+            let mut v = vec![line.clone()];
             v.extend([
                 frag(1, 31.0, 34.0, 0.0),
                 frag(2, 31.8, 32.8, off),

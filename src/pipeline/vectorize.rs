@@ -2525,6 +2525,12 @@ mod tests {
         p
     }
 
+    /// Where a far line's one fragment per 6 m dash lies in its dash (m from the dash's
+    /// start), dash by dash.
+    const FAR_FRAGMENT_AT: [f64; 16] = [
+        0.2, 2.5, 5.0, 1.0, 4.2, 3.3, 0.6, 5.2, 2.0, 3.9, 1.5, 4.8, 0.9, 2.8, 5.3, 1.8,
+    ];
+
     /// Two dashed lines 1.8 m either side of the trajectory, 6 m dashes every 15 m from x = 3
     /// to 270: the drive's design.
     fn near_dashed_lines() -> Vec<Piece> {
@@ -2549,10 +2555,7 @@ mod tests {
     fn a_far_line_seen_as_fragments_is_put_on_the_drive_design() {
         let traj = crate::pipeline::types::test_straight_trajectory(300, -20.0);
         let mut pieces = near_dashed_lines();
-        let inside = [
-            0.2, 2.5, 5.0, 1.0, 4.2, 3.3, 0.6, 5.2, 2.0, 3.9, 1.5, 4.8, 0.9, 2.8, 5.3, 1.8,
-        ];
-        for (k, &at) in inside.iter().enumerate() {
+        for (k, &at) in FAR_FRAGMENT_AT.iter().enumerate() {
             pieces.push(fragment(3.0 + 15.0 * k as f64 + at, 22.75));
         }
         for k in 0..12 {
@@ -2593,10 +2596,11 @@ mod tests {
     fn a_far_line_of_fragments_spans_two_unseen_dashes() {
         let traj = crate::pipeline::types::test_straight_trajectory(300, -20.0);
         let mut pieces = near_dashed_lines();
-        let inside = [
-            0.2, 2.5, 5.0, 1.0, 4.2, 3.3, 0.6, 5.2, 2.0, 3.9, 1.5, 4.8, 0.9, 2.8, 5.3, 1.8,
-        ];
-        for (k, &at) in inside.iter().enumerate().filter(|(k, _)| !(4..6).contains(k)) {
+        for (k, &at) in FAR_FRAGMENT_AT
+            .iter()
+            .enumerate()
+            .filter(|(k, _)| !(4..6).contains(k))
+        {
             pieces.push(fragment(3.0 + 15.0 * k as f64 + at, 22.75));
         }
         let (_, lines) = assemble(pieces, &traj, &Params::default(), None);
@@ -2621,10 +2625,7 @@ mod tests {
             0.0, -0.18, 0.1, -0.15, 0.14, -0.06, -0.2, 0.05, 0.1, -0.16, 0.15, -0.03, -0.14, 0.07, 0.12,
             -0.18,
         ];
-        let inside = [
-            0.2, 2.5, 5.0, 1.0, 4.2, 3.3, 0.6, 5.2, 2.0, 3.9, 1.5, 4.8, 0.9, 2.8, 5.3, 1.8,
-        ];
-        for (k, (&j, &at)) in jitter.iter().zip(&inside).enumerate() {
+        for (k, (&j, &at)) in jitter.iter().zip(&FAR_FRAGMENT_AT).enumerate() {
             pieces.push(fragment(3.0 + 15.0 * k as f64 + at, 22.75 + j));
         }
         for k in 0..16 {
@@ -2660,10 +2661,7 @@ mod tests {
         for k in 0..9 {
             pieces.push(shifted(solid(30.0 * k as f64, 30.0 * k as f64 + 29.0), 12.0));
         }
-        let inside = [
-            0.2, 2.5, 5.0, 1.0, 4.2, 3.3, 0.6, 5.2, 2.0, 3.9, 1.5, 4.8, 0.9, 2.8, 5.3, 1.8,
-        ];
-        for (k, &at) in inside.iter().enumerate() {
+        for (k, &at) in FAR_FRAGMENT_AT.iter().enumerate() {
             let x = 3.0 + 15.0 * k as f64 + at;
             pieces.push(fragment(x, 22.75));
             pieces.push(fragment(x, 9.0 + 0.005 * x));
