@@ -1164,3 +1164,56 @@ fn a_worn_open_diamond_is_outlined_as_its_rhombus() {
     println!("worn diamond outline area {area:.3} m² (rhombus part 1.53)");
     assert!((1.35..=1.75).contains(&area), "area {area}");
 }
+
+/// A marking named an arrow must hold an arrowhead: a bending 0.12 m stroke (crack sealant
+/// that the learned classifier took for a right arrow's branch) holds no circle wider than
+/// its half width and is dropped; an arrow with a 0.8 m head beside it is kept.
+#[test]
+fn a_thin_stroke_named_an_arrow_is_dropped() {
+    let (mut cloud, traj) = scan(Path { radius: None }, 60.0, &[], 9);
+    let mut stroke = 0;
+    let mut arrow = 0;
+    for i in 0..=200 {
+        for j in 0..=60 {
+            let (x, y) = (20.0 + i as f64 * 0.02, 3.0 + j as f64 * 0.02);
+            // The stroke bends from along the road to 40° across it.
+            let t = x - 20.0;
+            let mid = 4.0 + if t < 2.0 { 0.0 } else { 0.84 * (t - 2.0) };
+            if (y - mid).abs() <= 0.06 {
+                cloud.push_local(x, y, 0.0, 4e4, None, 0);
+                stroke += 1;
+            }
+            // Arrow: shaft x 30..33, 0.25 m wide at y = 4; head x 33..34.5, 0.8 m at its base.
+            let (xa, ya) = (x + 10.0, y);
+            let shaft = (30.0..33.0).contains(&xa) && (ya - 4.0).abs() <= 0.125;
+            let head = (33.0..=34.5).contains(&xa) && (ya - 4.0).abs() <= 0.4 * (34.5 - xa) / 1.5;
+            if shaft || head {
+                cloud.push_local(xa, ya, 0.0, 4e4, None, 0);
+                arrow += 1;
+            }
+        }
+    }
+    let out = pipeline(&cloud, &traj);
+    let mut candidates: Vec<classify::Candidate> = out
+        .candidates
+        .into_iter()
+        .filter(|c| c.indices.len() * 2 > stroke.min(arrow))
+        .collect();
+    assert_eq!(candidates.len(), 2, "the stroke and the arrow");
+    for c in &mut candidates {
+        c.class = MarkingClass::RightArrow;
+    }
+    let pieces = vectorize::outlines(&cloud, &candidates, &vectorize::Params::default());
+    let kept: Vec<f64> = pieces
+        .iter()
+        .map(|p| outline::inscribed_radius(&p.marking.outline))
+        .collect();
+    assert_eq!(pieces.len(), 1, "only the arrow stays: {kept:?}");
+    assert!(
+        pieces[0]
+            .marking
+            .outline
+            .iter()
+            .all(|q| q[0] - cloud.origin[0] > 29.0)
+    );
+}

@@ -887,7 +887,11 @@ where
 /// `solid_min_length_m` long takes every point within its half width (+3 cm) of the
 /// track's centre; the rest is re-clustered
 /// (0.25 m components) and peeled again, up to [`PEEL_ROUNDS`] lines; points just beyond a
-/// peeled track ([`PEEL_EDGE_M`]) go with no piece. Cost: O(m log m) for m points.
+/// peeled track ([`PEEL_EDGE_M`]) go with no piece. Every piece gets the cluster as its
+/// `whole` (when no longer than a painted object), except where pieces are bars across the
+/// road ([`bars_across`]: an expansion joint through an arrow): the cluster without them
+/// falls into components, and each piece gets its component's whole (none for the bars, or
+/// for a piece alone in its component). Cost: O(m log m) for m points.
 fn peel_lines(
     c: Candidate,
     xy: &[[f64; 2]],
@@ -899,6 +903,7 @@ fn peel_lines(
         return vec![c];
     }
     let whole = (c.shape.length_m <= MAX_OBJECT_LENGTH_M).then(|| Arc::new(c.clone()));
+    let cluster = c.indices.clone();
     let mut out = Vec::new();
     // The points left and their (s, o), located once and carried through the rounds.
     let mut rest = c.indices;
@@ -942,10 +947,100 @@ fn peel_lines(
         let idx: Vec<usize> = comp.into_iter().map(|k| rest[k]).collect();
         out.push(describe(xy, intensity, idx, refl, p));
     }
-    for piece in &mut out {
-        piece.whole.clone_from(&whole);
+    let bars = bars_across(&out, p);
+    if !bars.contains(&true) {
+        for piece in &mut out {
+            piece.whole.clone_from(&whole);
+        }
+        return out;
+    }
+    // The cluster without its bars falls into the marks the bars joined: each gets its own
+    // whole (when it holds two pieces or more, and is no longer than a painted object).
+    let mut in_bars: Vec<usize> = out
+        .iter()
+        .zip(&bars)
+        .filter(|(_, b)| **b)
+        .flat_map(|(piece, _)| piece.indices.iter().copied())
+        .collect();
+    in_bars.sort_unstable();
+    let kept: Vec<usize> = cluster
+        .into_iter()
+        .filter(|i| in_bars.binary_search(i).is_err())
+        .collect();
+    let pts: Vec<[f64; 2]> = kept.iter().map(|&i| xy[i]).collect();
+    let comps = geom::components(&pts, 0.25);
+    let mut comp_of: std::collections::HashMap<usize, usize> =
+        std::collections::HashMap::with_capacity(kept.len());
+    for (ci, comp) in comps.iter().enumerate() {
+        for &k in comp {
+            comp_of.insert(kept[k], ci);
+        }
+    }
+    let piece_comp: Vec<Option<usize>> = out
+        .iter()
+        .zip(&bars)
+        .map(|(piece, &bar)| {
+            (!bar)
+                .then(|| piece.indices.first().and_then(|i| comp_of.get(i).copied()))
+                .flatten()
+        })
+        .collect();
+    let wholes: Vec<Option<Arc<Candidate>>> = comps
+        .iter()
+        .enumerate()
+        .map(|(ci, comp)| {
+            if piece_comp.iter().filter(|&&pc| pc == Some(ci)).count() < 2 {
+                return None;
+            }
+            let w = describe(xy, intensity, comp.iter().map(|&k| kept[k]).collect(), refl, p);
+            (w.shape.length_m <= MAX_OBJECT_LENGTH_M).then(|| Arc::new(w))
+        })
+        .collect();
+    for (piece, pc) in out.iter_mut().zip(piece_comp) {
+        piece.whole = pc.and_then(|ci| wholes[ci].clone());
     }
     out
+}
+
+/// Least length (m) of a bar across the road that [`peel_lines`] takes out of the wholes
+/// (see [`bars_across`]).
+const CROSS_BAR_MIN_LENGTH_M: f64 = 2.0;
+
+/// Which pieces of a peeled cluster are bars across the road that only touch the other
+/// marks: filled straight bars of a stop line's width at ≥ 60° to the trajectory, at least
+/// [`CROSS_BAR_MIN_LENGTH_M`] long and at least twice as long as the other pieces (bars
+/// apart) reach along their axis. An expansion joint or a stop line running through an
+/// arrow made the arrow's whole no arrow to the learned classifier (a straight arrow
+/// crossed by a bridge joint read as a straight-and-turn arrow); a turning branch is
+/// shorter, and the arrow it leaves reaches as far across.
+fn bars_across(pieces: &[Candidate], p: &Params) -> Vec<bool> {
+    let shaped: Vec<bool> = pieces
+        .iter()
+        .map(|c| {
+            let s = &c.shape;
+            s.fill_ratio >= 0.65
+                && s.angle_to_trajectory_deg >= 60.0
+                && s.width_m >= p.stop_min_width_m
+                && s.width_m <= p.stop_max_width_m
+                && s.length_m >= CROSS_BAR_MIN_LENGTH_M
+        })
+        .collect();
+    (0..pieces.len())
+        .map(|k| {
+            let s = &pieces[k].shape;
+            // The other pieces' reach along the bar's axis (their rectangles' corners).
+            let (lo, hi) = pieces
+                .iter()
+                .zip(&shaped)
+                .filter(|(_, bar)| !**bar)
+                .flat_map(|(q, _)| q.shape.corners())
+                .map(|c| (c[0] - s.center[0]) * s.axis[0] + (c[1] - s.center[1]) * s.axis[1])
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |a, u| {
+                    (a.0.min(u), a.1.max(u))
+                });
+            shaped[k] && (hi < lo || s.length_m >= 2.0 * (hi - lo))
+        })
+        .collect()
 }
 
 /// Largest offset change per 0.5 m slice (m) a line track's slope is taken as (~17°).
@@ -1675,6 +1770,73 @@ mod tests {
         ));
         assert_eq!(shaft.indices.len(), groups[0].len() + groups[1].len());
         assert!(items[2..].iter().all(|(c, _)| c.whole.is_none()));
+    }
+
+    /// A 9 m arrow (0.3 m shaft along the road, 0.8 m head) crossed by a bar across the
+    /// road (an expansion joint, 10 m long), with a 1.3 m turning branch leaving the shaft
+    /// square to it: the shaft is peeled, and the arrow's pieces (shaft, head, branch)
+    /// share a whole without the bar's pieces; the bar's pieces have none. Before, the
+    /// whole held the bar too and the network read it as a turn arrow.
+    #[test]
+    fn a_bar_across_an_arrow_is_no_part_of_its_whole() {
+        let (r, p) = (refl(), Params::default());
+        let mut xy: Vec<[f64; 2]> = Vec::new();
+        let shaft = block(&mut xy, 10.0, 18.0, 1.0, 1.3);
+        let head = block(&mut xy, 18.03, 19.5, 0.75, 1.55);
+        let branch = block(&mut xy, 12.0, 12.25, 1.33, 2.6);
+        let bar: Vec<usize> = block(&mut xy, 14.0, 14.25, -4.0, 6.0)
+            .into_iter()
+            .filter(|&i| !(0.99..=1.31).contains(&xy[i][1]))
+            .collect();
+        let keep: Vec<usize> = shaft
+            .iter()
+            .chain(&head)
+            .chain(&branch)
+            .chain(&bar)
+            .copied()
+            .collect();
+        let intensity = vec![100.0f32; xy.len()];
+        let whole = describe(&xy, &intensity, keep, &r, &p);
+        assert!(whole.line.is_none());
+        let out = peel_lines(whole, &xy, &intensity, &r, &p);
+        let summary: Vec<_> = out
+            .iter()
+            .map(|c| {
+                (
+                    c.indices.len(),
+                    c.shape.length_m,
+                    c.whole.as_ref().map(|w| w.indices.len()),
+                )
+            })
+            .collect();
+        let on_bar = |c: &Candidate| c.indices.iter().all(|i| bar.contains(i));
+        let bar_pieces: Vec<&Candidate> = out.iter().filter(|c| on_bar(c)).collect();
+        assert!(
+            !bar_pieces.is_empty() && bar_pieces.iter().all(|c| c.whole.is_none()),
+            "{summary:?}"
+        );
+        let arrow: Vec<&Candidate> = out.iter().filter(|c| !on_bar(c)).collect();
+        assert!(arrow.len() >= 3, "shaft, head and branch: {summary:?}");
+        let w = arrow[0].whole.as_ref().expect("the arrow has a whole");
+        assert!(
+            arrow
+                .iter()
+                .all(|c| c.whole.as_ref().is_some_and(|v| Arc::ptr_eq(v, w)))
+        );
+        // Of the bar, only the ragged edge beside the peeled shaft (in no piece) is left.
+        let left: Vec<f64> = w
+            .indices
+            .iter()
+            .filter(|i| bar.contains(i))
+            .map(|&i| xy[i][1])
+            .collect();
+        assert!(
+            left.iter().all(|y| (y - 1.15).abs() <= 0.3),
+            "bar points in the whole: {left:?}"
+        );
+        for part in [&shaft, &head, &branch] {
+            assert!(part.iter().all(|i| w.indices.contains(i)), "{summary:?}");
+        }
     }
 
     /// The same sparse arrow with a lane line passing 0.35 m from its head, the line in

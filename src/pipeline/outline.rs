@@ -359,6 +359,20 @@ pub fn buffered_line_simple(line: &[[f64; 2]], half_width: f64) -> Vec<[f64; 2]>
     largest_exterior(&ls.buffer_with_style(style)).unwrap_or_default()
 }
 
+/// Radius (m) of the largest circle inside the ring: the distance from its pole of
+/// inaccessibility (the `polylabel` crate, to 5 mm) to the ring. 0 for a degenerate ring.
+pub fn inscribed_radius(ring: &[[f64; 2]]) -> f64 {
+    if ring.len() < 3 {
+        return 0.0;
+    }
+    use geo::{Distance, Euclidean};
+    let poly = to_polygon(ring);
+    let Ok(pole) = polylabel::polylabel(&poly, &0.005) else {
+        return 0.0;
+    };
+    Euclidean.distance(&pole, poly.exterior())
+}
+
 /// True when the closed ring (not repeated first vertex) has no two non-adjacent edges
 /// that touch or cross: a valid simple polygon boundary. O(n²) over the n edges (outlines
 /// have tens to a few hundred vertices).
@@ -402,6 +416,27 @@ pub fn is_simple(ring: &[[f64; 2]]) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn inscribed_radius_of_a_bar_a_triangle_and_a_stroke() {
+        let bar = [[0.0, 0.0], [2.0, 0.0], [2.0, 0.3], [0.0, 0.3]];
+        assert!((inscribed_radius(&bar) - 0.15).abs() < 0.006);
+        // Right triangle with legs 3 and 4: inradius (3 + 4 - 5) / 2 = 1.
+        let tri = [[0.0, 0.0], [4.0, 0.0], [0.0, 3.0]];
+        assert!((inscribed_radius(&tri) - 1.0).abs() < 0.006);
+        // An L of 0.1 m strokes: the widest circle sits in its corner, touching both outer
+        // edges and the inner corner: r = 0.1 √2 / (1 + √2) = 0.059.
+        let l = [
+            [0.0, 0.0],
+            [2.0, 0.0],
+            [2.0, 0.1],
+            [0.1, 0.1],
+            [0.1, 2.0],
+            [0.0, 2.0],
+        ];
+        assert!((inscribed_radius(&l) - 0.1 * 2f64.sqrt() / (1.0 + 2f64.sqrt())).abs() < 0.006);
+        assert_eq!(inscribed_radius(&[[0.0, 0.0], [1.0, 0.0]]), 0.0);
+    }
 
     #[test]
     fn simple_rings_are_told_from_self_intersecting_ones() {
