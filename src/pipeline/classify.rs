@@ -935,11 +935,47 @@ fn peel_lines(
     if out.is_empty() {
         return vec![describe(xy, intensity, rest, refl, p)];
     }
-    // The ragged edge of a peeled line (points just beyond its track's width) would chain
-    // everything that touches the line (the stripes of a gore) into one component: those
-    // points go with no piece.
+    // Bars across the road that the lines passed through (an expansion joint through an
+    // arrow and the lane lines): the same track search with mileage and offset swapped
+    // finds a run of near-constant mileage across the offsets.
+    let across = Params {
+        solid_min_length_m: CROSS_BAR_MIN_LENGTH_M,
+        line_max_width_m: p.stop_max_width_m,
+        ..p.clone()
+    };
+    let swap = |q: [f64; 2]| [q[1], q[0]];
+    let mut bar_tracks = Vec::new();
+    for _round in 0..BAR_ROUNDS {
+        let (o_lo, o_hi) = so.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, q| {
+            (a.0.min(q[1]), a.1.max(q[1]))
+        });
+        if o_hi - o_lo < CROSS_BAR_MIN_LENGTH_M {
+            break;
+        }
+        let os: Vec<[f64; 2]> = so.iter().map(|&q| swap(q)).collect();
+        let Some(track) = line_track(&os, o_lo, o_hi, &across) else {
+            break;
+        };
+        let (on, off): (Vec<usize>, Vec<usize>) = (0..rest.len()).partition(|&k| track(os[k]) <= 0.0);
+        if on.len() < 20 {
+            break;
+        }
+        let cand = describe(xy, intensity, on.iter().map(|&k| rest[k]).collect(), refl, p);
+        if !bar_shaped(&cand.shape, p) {
+            break;
+        }
+        out.push(cand);
+        (rest, so) = off.iter().map(|&k| (rest[k], so[k])).unzip();
+        bar_tracks.push(track);
+    }
+    // The ragged edge of a peeled line or bar (points just beyond its track's width) would
+    // chain everything that touches the line (the stripes of a gore) into one component:
+    // those points go with no piece.
     let rest: Vec<usize> = (0..rest.len())
-        .filter(|&k| tracks.iter().all(|t| t(so[k]) > PEEL_EDGE_M))
+        .filter(|&k| {
+            tracks.iter().all(|t| t(so[k]) > PEEL_EDGE_M)
+                && bar_tracks.iter().all(|t| t(swap(so[k])) > PEEL_EDGE_M)
+        })
         .map(|k| rest[k])
         .collect();
     let pts: Vec<[f64; 2]> = rest.iter().map(|&i| xy[i]).collect();
@@ -968,7 +1004,9 @@ fn peel_lines(
         .filter(|i| in_bars.binary_search(i).is_err())
         .collect();
     let pts: Vec<[f64; 2]> = kept.iter().map(|&i| xy[i]).collect();
-    let comps = geom::components(&pts, 0.25);
+    // A bar cuts what it crossed (an arrowhead) by its width and ragged edges: up to
+    // ~0.45 m apart, the parts are rejoined at the fragments' grouping distance.
+    let comps = geom::components(&pts, FRAGMENT_GAP_M);
     let mut comp_of: std::collections::HashMap<usize, usize> =
         std::collections::HashMap::with_capacity(kept.len());
     for (ci, comp) in comps.iter().enumerate() {
@@ -1002,6 +1040,19 @@ fn peel_lines(
     out
 }
 
+/// A filled straight bar of a stop line's width at ≥ 60° to the trajectory, at least
+/// [`CROSS_BAR_MIN_LENGTH_M`] long.
+fn bar_shaped(s: &Shape, p: &Params) -> bool {
+    s.fill_ratio >= 0.65
+        && s.angle_to_trajectory_deg >= 60.0
+        && s.width_m >= p.stop_min_width_m
+        && s.width_m <= p.stop_max_width_m
+        && s.length_m >= CROSS_BAR_MIN_LENGTH_M
+}
+
+/// Bars across the road peeled off one cluster at most (after its lines).
+const BAR_ROUNDS: usize = 2;
+
 /// Least length (m) of a bar across the road that [`peel_lines`] takes out of the wholes
 /// (see [`bars_across`]).
 const CROSS_BAR_MIN_LENGTH_M: f64 = 2.0;
@@ -1014,17 +1065,7 @@ const CROSS_BAR_MIN_LENGTH_M: f64 = 2.0;
 /// crossed by a bridge joint read as a straight-and-turn arrow); a turning branch is
 /// shorter, and the arrow it leaves reaches as far across.
 fn bars_across(pieces: &[Candidate], p: &Params) -> Vec<bool> {
-    let shaped: Vec<bool> = pieces
-        .iter()
-        .map(|c| {
-            let s = &c.shape;
-            s.fill_ratio >= 0.65
-                && s.angle_to_trajectory_deg >= 60.0
-                && s.width_m >= p.stop_min_width_m
-                && s.width_m <= p.stop_max_width_m
-                && s.length_m >= CROSS_BAR_MIN_LENGTH_M
-        })
-        .collect();
+    let shaped: Vec<bool> = pieces.iter().map(|c| bar_shaped(&c.shape, p)).collect();
     (0..pieces.len())
         .map(|k| {
             let s = &pieces[k].shape;
@@ -1837,6 +1878,64 @@ mod tests {
         for part in [&shaft, &head, &branch] {
             assert!(part.iter().all(|i| w.indices.contains(i)), "{summary:?}");
         }
+    }
+
+    /// The same arrow without a branch, the 10 m bar crossing its head instead of its
+    /// shaft: head and bar are one component of what is left once the shaft is peeled, so
+    /// the bar is peeled too (a run of near-constant mileage across the offsets), and the
+    /// whole of shaft and head (both its parts, 0.45 m apart across the bar) holds none of
+    /// it.
+    #[test]
+    fn a_bar_through_an_arrowhead_is_peeled_off_it() {
+        let (r, p) = (refl(), Params::default());
+        let mut xy: Vec<[f64; 2]> = Vec::new();
+        let shaft = block(&mut xy, 10.0, 18.0, 1.0, 1.3);
+        let head = block(&mut xy, 18.03, 19.5, 0.75, 1.55);
+        let bar: Vec<usize> = block(&mut xy, 18.6, 18.85, -4.0, 6.0)
+            .into_iter()
+            .filter(|&i| !(0.74..=1.56).contains(&xy[i][1]))
+            .collect();
+        let keep: Vec<usize> = shaft.iter().chain(&head).chain(&bar).copied().collect();
+        let intensity = vec![100.0f32; xy.len()];
+        let whole = describe(&xy, &intensity, keep, &r, &p);
+        let out = peel_lines(whole, &xy, &intensity, &r, &p);
+        let summary: Vec<_> = out
+            .iter()
+            .map(|c| {
+                (
+                    c.indices.len(),
+                    c.shape.length_m,
+                    c.whole.as_ref().map(|w| w.indices.len()),
+                )
+            })
+            .collect();
+        let on_bar =
+            |c: &Candidate| c.indices.iter().filter(|i| bar.contains(i)).count() * 2 > c.indices.len();
+        let bar_pieces: Vec<&Candidate> = out.iter().filter(|c| on_bar(c)).collect();
+        assert!(
+            !bar_pieces.is_empty() && bar_pieces.iter().all(|c| c.whole.is_none()),
+            "{summary:?}"
+        );
+        let w = out
+            .iter()
+            .find(|c| c.indices.contains(&shaft[0]))
+            .and_then(|c| c.whole.as_ref())
+            .expect("the shaft has a whole");
+        // The head on both sides of the bar (under it and its ragged edges, in no piece).
+        for side in [18.0..18.45, 19.0..19.5] {
+            let part: Vec<usize> = head
+                .iter()
+                .copied()
+                .filter(|&i| side.contains(&xy[i][0]))
+                .collect();
+            assert!(part.iter().all(|i| w.indices.contains(i)), "{summary:?}");
+        }
+        let left = w.indices.iter().filter(|i| bar.contains(i)).count();
+        assert!(
+            left * 20 < bar.len(),
+            "{left} of the bar's {} points in the whole",
+            bar.len()
+        );
     }
 
     /// The same sparse arrow with a lane line passing 0.35 m from its head, the line in
