@@ -1439,6 +1439,37 @@ fn stop_lines_crossed_by_lines(pieces: &mut [Piece], refl: &RefLine) {
     }
 }
 
+/// Arrows are painted in the middle of their lane, half a lane from its lines: the arrows
+/// found on the simulated drives lie 0.8-1.9 m from the nearest lane line (centre of their
+/// outline). A mark "named an arrow" whose centre lies within this distance (m) of a lane
+/// line is a piece of that line: a dash the learned classifier read as a left arrow (its
+/// end frayed by a crossing scan row), a solid line's end with the stub of the stop line
+/// it meets read as a straight arrow.
+const ARROW_MIN_LANE_DISTANCE_M: f64 = 0.5;
+
+/// Pieces named arrows on a lane line's course (within [`ARROW_MIN_LANE_DISTANCE_M`]) take
+/// the line's class (see there). They do not join the line: the line was grown without
+/// them, and a dash read as an arrow overlaps the dash that took its place in the line (an
+/// isolated dash then becomes `unknown` with `isolated_dashes_unknown`).
+fn arrows_on_lane_lines(pieces: &mut [Piece], lines: &[lanes::LaneResult]) {
+    use geo::Centroid;
+    for p in pieces.iter_mut().filter(|p| p.marking.class.is_arrow()) {
+        let Some(c) = outline::to_polygon(&p.marking.outline).centroid() else {
+            continue;
+        };
+        let on = lines
+            .iter()
+            .filter(|l| l.line.len() >= 2)
+            .find(|l| locate_on(&l.line, [c.x(), c.y()]).0 <= ARROW_MIN_LANE_DISTANCE_M);
+        if let Some(l) = on {
+            p.marking.class = match l.class {
+                LaneLineClass::SolidLine => MarkingClass::SolidLine,
+                LaneLineClass::DashedLine => MarkingClass::DashedLine,
+            };
+        }
+    }
+}
+
 /// How far along the road (m) the lane lines beside a bar across it are looked for, and how
 /// far (m) beyond the outermost of them the bar must begin, for [`stop_lines_beyond_edges`].
 const EDGE_WINDOW_M: f64 = 40.0;
@@ -1686,6 +1717,7 @@ pub fn assemble(
         pieces[k].marking.class = class;
     }
     stop_lines_beyond_edges(&mut pieces, &lanes.lines, &refl);
+    arrows_on_lane_lines(&mut pieces, &lanes.lines);
     if params.isolated_dashes_unknown {
         let mut in_lane = vec![false; pieces.len()];
         for &(k, _) in &lanes.classes {
@@ -2454,6 +2486,42 @@ mod tests {
         assert_eq!(
             class_of(-14.0, -9.0, &[lane(-5.3, 75.0, 80.0)]),
             MarkingClass::StopLine
+        );
+    }
+
+    /// A mark named an arrow whose centre lies on a lane line's course (0.3 m from it, or
+    /// just past its end) takes the line's class; an arrow in the middle of the lane (1.7 m
+    /// from it) stays an arrow.
+    #[test]
+    fn arrows_on_a_lane_lines_course_are_pieces_of_it() {
+        let line = |class: LaneLineClass| lanes::LaneResult {
+            class,
+            line: vec![[0.0, 0.0], [40.0, 0.0]],
+            confidence: 0.9,
+            length_m: 40.0,
+            pieces: vec![],
+            start: [0.0, 0.0],
+        };
+        let class_of = |x0: f64, o0: f64, o1: f64, l: LaneLineClass| {
+            let mut pieces = vec![rect(MarkingClass::StraightArrow, x0, x0 + 3.0, o0, o1)];
+            arrows_on_lane_lines(&mut pieces, &[line(l)]);
+            pieces[0].marking.class
+        };
+        assert_eq!(
+            class_of(10.0, 0.05, 0.55, LaneLineClass::DashedLine),
+            MarkingClass::DashedLine
+        );
+        assert_eq!(
+            class_of(38.6, -0.4, 0.1, LaneLineClass::SolidLine),
+            MarkingClass::SolidLine
+        );
+        assert_eq!(
+            class_of(10.0, 1.3, 2.1, LaneLineClass::SolidLine),
+            MarkingClass::StraightArrow
+        );
+        assert_eq!(
+            class_of(45.0, -0.2, 0.2, LaneLineClass::SolidLine),
+            MarkingClass::StraightArrow
         );
     }
 
