@@ -18,7 +18,8 @@
 //! (dashes, stop lines, crosswalk and guideline stripes); the centreline buffered by half the
 //! painted width for solid pieces and curved dashes (sagitta > `curved_min_sagitta_m`);
 //! alpha shapes for irregular marks (arrows, diamonds, unknown; a diamond worn open gets the
-//! convex hull of its alpha shape). Heading: long axis, pointing
+//! convex hull of its alpha shape; an arrow whose outline holds no arrowhead, no circle of
+//! `ARROW_MIN_INRADIUS_M`, is a thin stroke and dropped). Heading: long axis, pointing
 //! along the driving direction (stop lines: pointing to the right of it), degrees clockwise
 //! from north. Lane lines: see `lanes` (improved line-segment self-growth of Yao 2021).
 //!
@@ -30,7 +31,8 @@
 //! marks on their centre line (`stoplines`); "stop lines" across the road that a lane line runs on through made
 //! `unknown`; lane-line growth with crosswalks and stop lines as barriers; bars across the
 //! road wholly beyond the outermost lane line on their side (a side street's centre line,
-//! dashes, crossing stripes) made `unknown`; lane lines of line fragments alone (pieces
+//! dashes, crossing stripes) made `unknown`; marks named arrows on a lane line's course
+//! (arrows are painted mid-lane) given the line's class; lane lines of line fragments alone (pieces
 //! flagged [`Piece::fragment`], too small for markings: a far lane's dashes seen as one
 //! scan row each) where they fall on the drive's dash design (`fragment_lines`), other
 //! fragments dropped; line pieces whose width the points do not
