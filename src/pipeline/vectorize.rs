@@ -1442,11 +1442,11 @@ fn stop_lines_crossed_by_lines(pieces: &mut [Piece], refl: &RefLine) {
 }
 
 /// Arrows are painted in the middle of their lane, half a lane from its lines: the arrows
-/// found on the simulated drives lie 0.8-1.9 m from the nearest lane line (centre of their
-/// outline). A mark "named an arrow" whose centre lies within this distance (m) of a lane
-/// line is a piece of that line: a dash the learned classifier read as a left arrow (its
-/// end frayed by a crossing scan row), a solid line's end with the stub of the stop line
-/// it meets read as a straight arrow.
+/// found on the simulated drives lie 0.8-3.6 m (all but one under 1.9 m) from the nearest
+/// lane line (centre of their outline). A mark "named an arrow" whose centre lies within
+/// this distance (m) of a lane line is a piece of that line: a dash the learned classifier
+/// read as a left arrow (its end frayed by a crossing scan row), a solid line's end with
+/// the stub of the stop line it meets read as a straight arrow.
 const ARROW_MIN_LANE_DISTANCE_M: f64 = 0.5;
 
 /// Pieces named arrows on a lane line's course (within [`ARROW_MIN_LANE_DISTANCE_M`]) take
