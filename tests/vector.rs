@@ -1131,6 +1131,15 @@ fn clip_truth(
     truth
 }
 
+/// The candidates of a run holding more than `points` points (the marks a test painted,
+/// not the scraps beside them).
+fn candidates_over(out: Out, points: usize) -> Vec<classify::Candidate> {
+    out.candidates
+        .into_iter()
+        .filter(|c| c.indices.len() > points)
+        .collect()
+}
+
 /// A diamond worn open (its right tip gone, a C of paint 0.2 m wide) is outlined as the
 /// rhombus it was painted as, not as the band of paint: the convex hull closes the band.
 #[test]
@@ -1150,12 +1159,7 @@ fn a_worn_open_diamond_is_outlined_as_its_rhombus() {
             }
         }
     }
-    let out = pipeline(&cloud, &traj);
-    let mut candidates: Vec<classify::Candidate> = out
-        .candidates
-        .into_iter()
-        .filter(|c| c.indices.len() * 2 > rim)
-        .collect();
+    let mut candidates = candidates_over(pipeline(&cloud, &traj), rim / 2);
     assert_eq!(candidates.len(), 1, "the rim is one candidate");
     candidates[0].class = MarkingClass::Diamond;
     let pieces = vectorize::outlines(&cloud, &candidates, &vectorize::Params::default());
@@ -1193,12 +1197,7 @@ fn a_thin_stroke_named_an_arrow_is_dropped() {
             }
         }
     }
-    let out = pipeline(&cloud, &traj);
-    let mut candidates: Vec<classify::Candidate> = out
-        .candidates
-        .into_iter()
-        .filter(|c| c.indices.len() * 2 > stroke.min(arrow))
-        .collect();
+    let mut candidates = candidates_over(pipeline(&cloud, &traj), stroke.min(arrow) / 2);
     assert_eq!(candidates.len(), 2, "the stroke and the arrow");
     for c in &mut candidates {
         c.class = MarkingClass::RightArrow;

@@ -908,22 +908,30 @@ fn peel_lines(
     // The points left and their (s, o), located once and carried through the rounds.
     let mut rest = c.indices;
     let mut so: Vec<[f64; 2]> = rest.iter().map(|&i| refl.locate(xy[i])).collect();
-    let mut tracks = Vec::new();
-    for _round in 0..PEEL_ROUNDS {
-        let (s_lo, s_hi) = so.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, q| {
+    // One round: the longest track of `tp` with (s, o) mapped by `frame` to (along,
+    // across): the piece of the points on it, the indices (into `rest`) of the others, and
+    // the track as a distance over (s, o).
+    let peel = |tp: &Params, frame: fn([f64; 2]) -> [f64; 2], rest: &[usize], so: &[[f64; 2]]| {
+        let fs: Vec<[f64; 2]> = so.iter().map(|&q| frame(q)).collect();
+        let (lo, hi) = fs.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, q| {
             (a.0.min(q[0]), a.1.max(q[0]))
         });
-        if s_hi - s_lo < p.solid_min_length_m {
-            break;
+        if hi - lo < tp.solid_min_length_m {
+            return None;
         }
-        let Some(track) = line_track(&so, s_lo, s_hi, p) else {
-            break;
-        };
-        let (on, off): (Vec<usize>, Vec<usize>) = (0..rest.len()).partition(|&k| track(so[k]) <= 0.0);
+        let track = line_track(&fs, lo, hi, tp)?;
+        let (on, off): (Vec<usize>, Vec<usize>) = (0..rest.len()).partition(|&k| track(fs[k]) <= 0.0);
         if on.len() < 20 {
-            break;
+            return None;
         }
         let cand = describe(xy, intensity, on.iter().map(|&k| rest[k]).collect(), refl, p);
+        Some((cand, off, move |q: [f64; 2]| track(frame(q))))
+    };
+    let mut tracks = Vec::new();
+    for _round in 0..PEEL_ROUNDS {
+        let Some((cand, off, track)) = peel(p, |q| q, &rest, &so) else {
+            break;
+        };
         if cand.line.is_none() {
             // Not a clean line after all: keep the cluster as it was.
             break;
@@ -943,39 +951,22 @@ fn peel_lines(
         line_max_width_m: p.stop_max_width_m,
         ..p.clone()
     };
-    let swap = |q: [f64; 2]| [q[1], q[0]];
-    let mut bar_tracks = Vec::new();
     for _round in 0..BAR_ROUNDS {
-        let (o_lo, o_hi) = so.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, q| {
-            (a.0.min(q[1]), a.1.max(q[1]))
-        });
-        if o_hi - o_lo < CROSS_BAR_MIN_LENGTH_M {
-            break;
-        }
-        let os: Vec<[f64; 2]> = so.iter().map(|&q| swap(q)).collect();
-        let Some(track) = line_track(&os, o_lo, o_hi, &across) else {
+        let Some((cand, off, track)) = peel(&across, |q| [q[1], q[0]], &rest, &so) else {
             break;
         };
-        let (on, off): (Vec<usize>, Vec<usize>) = (0..rest.len()).partition(|&k| track(os[k]) <= 0.0);
-        if on.len() < 20 {
-            break;
-        }
-        let cand = describe(xy, intensity, on.iter().map(|&k| rest[k]).collect(), refl, p);
         if !bar_shaped(&cand.shape, p) {
             break;
         }
         out.push(cand);
         (rest, so) = off.iter().map(|&k| (rest[k], so[k])).unzip();
-        bar_tracks.push(track);
+        tracks.push(track);
     }
     // The ragged edge of a peeled line or bar (points just beyond its track's width) would
     // chain everything that touches the line (the stripes of a gore) into one component:
     // those points go with no piece.
     let rest: Vec<usize> = (0..rest.len())
-        .filter(|&k| {
-            tracks.iter().all(|t| t(so[k]) > PEEL_EDGE_M)
-                && bar_tracks.iter().all(|t| t(swap(so[k])) > PEEL_EDGE_M)
-        })
+        .filter(|&k| tracks.iter().all(|t| t(so[k]) > PEEL_EDGE_M))
         .map(|k| rest[k])
         .collect();
     let pts: Vec<[f64; 2]> = rest.iter().map(|&i| xy[i]).collect();
@@ -1040,14 +1031,19 @@ fn peel_lines(
     out
 }
 
-/// A filled straight bar of a stop line's width at ≥ 60° to the trajectory, at least
-/// [`CROSS_BAR_MIN_LENGTH_M`] long.
-fn bar_shaped(s: &Shape, p: &Params) -> bool {
+/// A filled bar (fill ≥ 0.65, length ≥ 2.5 × width) of a stop line's width at ≥ 60° to
+/// the trajectory: the rules' stop line, whatever its length.
+fn stop_line_shaped(s: &Shape, p: &Params) -> bool {
     s.fill_ratio >= 0.65
+        && s.length_m / s.width_m.max(1e-3) >= 2.5
         && s.angle_to_trajectory_deg >= 60.0
         && s.width_m >= p.stop_min_width_m
         && s.width_m <= p.stop_max_width_m
-        && s.length_m >= CROSS_BAR_MIN_LENGTH_M
+}
+
+/// A bar across the road: shaped like a stop line, at least [`CROSS_BAR_MIN_LENGTH_M`] long.
+fn bar_shaped(s: &Shape, p: &Params) -> bool {
+    stop_line_shaped(s, p) && s.length_m >= CROSS_BAR_MIN_LENGTH_M
 }
 
 /// Bars across the road peeled off one cluster at most (after its lines).
@@ -1501,12 +1497,7 @@ fn rule(mut c: Candidate, p: &Params) -> (Candidate, Option<DropReason>) {
     }
     let bar = s.fill_ratio >= 0.65 && aspect >= 2.5;
     let ang = s.angle_to_trajectory_deg;
-    if bar
-        && ang >= 60.0
-        && s.width_m >= p.stop_min_width_m
-        && s.width_m <= p.stop_max_width_m
-        && s.length_m >= 1.5
-    {
+    if stop_line_shaped(s, p) && s.length_m >= 1.5 {
         c.class = MarkingClass::StopLine;
         c.confidence = 0.8 * inside(s.width_m, p.stop_min_width_m, p.stop_max_width_m);
         return (c, None);
@@ -1813,33 +1804,32 @@ mod tests {
         assert!(items[2..].iter().all(|(c, _)| c.whole.is_none()));
     }
 
-    /// A 9 m arrow (0.3 m shaft along the road, 0.8 m head) crossed by a bar across the
-    /// road (an expansion joint, 10 m long), with a 1.3 m turning branch leaving the shaft
-    /// square to it: the shaft is peeled, and the arrow's pieces (shaft, head, branch)
-    /// share a whole without the bar's pieces; the bar's pieces have none. Before, the
-    /// whole held the bar too and the network read it as a turn arrow.
-    #[test]
-    fn a_bar_across_an_arrow_is_no_part_of_its_whole() {
+    /// A 9 m arrow's shaft (0.3 m wide, along the road over x 10..18) and head (0.8 m
+    /// wide at its base, 18..19.5).
+    fn shaft_and_head(xy: &mut Vec<[f64; 2]>) -> (Vec<usize>, Vec<usize>) {
+        (
+            block(xy, 10.0, 18.0, 1.0, 1.3),
+            block(xy, 18.03, 19.5, 0.75, 1.55),
+        )
+    }
+
+    /// A 10 m bar across the road (0.25 m wide from `x0`, an expansion joint), without its
+    /// points where it crosses the marks at y in `on_marks`.
+    fn bar_across(xy: &mut Vec<[f64; 2]>, x0: f64, on_marks: std::ops::RangeInclusive<f64>) -> Vec<usize> {
+        let bar = block(xy, x0, x0 + 0.25, -4.0, 6.0);
+        bar.into_iter()
+            .filter(|&i| !on_marks.contains(&xy[i][1]))
+            .collect()
+    }
+
+    /// [`peel_lines`] on the cluster of `parts`, and its pieces' point counts, lengths and
+    /// their wholes' point counts (for failure messages).
+    fn peel_parts(xy: &[[f64; 2]], parts: &[&[usize]]) -> (Vec<Candidate>, String) {
         let (r, p) = (refl(), Params::default());
-        let mut xy: Vec<[f64; 2]> = Vec::new();
-        let shaft = block(&mut xy, 10.0, 18.0, 1.0, 1.3);
-        let head = block(&mut xy, 18.03, 19.5, 0.75, 1.55);
-        let branch = block(&mut xy, 12.0, 12.25, 1.33, 2.6);
-        let bar: Vec<usize> = block(&mut xy, 14.0, 14.25, -4.0, 6.0)
-            .into_iter()
-            .filter(|&i| !(0.99..=1.31).contains(&xy[i][1]))
-            .collect();
-        let keep: Vec<usize> = shaft
-            .iter()
-            .chain(&head)
-            .chain(&branch)
-            .chain(&bar)
-            .copied()
-            .collect();
         let intensity = vec![100.0f32; xy.len()];
-        let whole = describe(&xy, &intensity, keep, &r, &p);
+        let whole = describe(xy, &intensity, parts.concat(), &r, &p);
         assert!(whole.line.is_none());
-        let out = peel_lines(whole, &xy, &intensity, &r, &p);
+        let out = peel_lines(whole, xy, &intensity, &r, &p);
         let summary: Vec<_> = out
             .iter()
             .map(|c| {
@@ -1850,14 +1840,29 @@ mod tests {
                 )
             })
             .collect();
+        (out, format!("{summary:?}"))
+    }
+
+    /// A 9 m arrow crossed by a bar across the road (an expansion joint, 10 m long), with a
+    /// 1.3 m turning branch leaving the shaft square to it: the shaft is peeled, and the
+    /// arrow's pieces (shaft, head, branch) share a whole without the bar's pieces; the
+    /// bar's pieces have none. Before, the whole held the bar too and the network read it
+    /// as a turn arrow.
+    #[test]
+    fn a_bar_across_an_arrow_is_no_part_of_its_whole() {
+        let mut xy: Vec<[f64; 2]> = Vec::new();
+        let (shaft, head) = shaft_and_head(&mut xy);
+        let branch = block(&mut xy, 12.0, 12.25, 1.33, 2.6);
+        let bar = bar_across(&mut xy, 14.0, 0.99..=1.31);
+        let (out, summary) = peel_parts(&xy, &[&shaft, &head, &branch, &bar]);
         let on_bar = |c: &Candidate| c.indices.iter().all(|i| bar.contains(i));
         let bar_pieces: Vec<&Candidate> = out.iter().filter(|c| on_bar(c)).collect();
         assert!(
             !bar_pieces.is_empty() && bar_pieces.iter().all(|c| c.whole.is_none()),
-            "{summary:?}"
+            "{summary}"
         );
         let arrow: Vec<&Candidate> = out.iter().filter(|c| !on_bar(c)).collect();
-        assert!(arrow.len() >= 3, "shaft, head and branch: {summary:?}");
+        assert!(arrow.len() >= 3, "shaft, head and branch: {summary}");
         let w = arrow[0].whole.as_ref().expect("the arrow has a whole");
         assert!(
             arrow
@@ -1876,7 +1881,7 @@ mod tests {
             "bar points in the whole: {left:?}"
         );
         for part in [&shaft, &head, &branch] {
-            assert!(part.iter().all(|i| w.indices.contains(i)), "{summary:?}");
+            assert!(part.iter().all(|i| w.indices.contains(i)), "{summary}");
         }
     }
 
@@ -1887,34 +1892,16 @@ mod tests {
     /// it.
     #[test]
     fn a_bar_through_an_arrowhead_is_peeled_off_it() {
-        let (r, p) = (refl(), Params::default());
         let mut xy: Vec<[f64; 2]> = Vec::new();
-        let shaft = block(&mut xy, 10.0, 18.0, 1.0, 1.3);
-        let head = block(&mut xy, 18.03, 19.5, 0.75, 1.55);
-        let bar: Vec<usize> = block(&mut xy, 18.6, 18.85, -4.0, 6.0)
-            .into_iter()
-            .filter(|&i| !(0.74..=1.56).contains(&xy[i][1]))
-            .collect();
-        let keep: Vec<usize> = shaft.iter().chain(&head).chain(&bar).copied().collect();
-        let intensity = vec![100.0f32; xy.len()];
-        let whole = describe(&xy, &intensity, keep, &r, &p);
-        let out = peel_lines(whole, &xy, &intensity, &r, &p);
-        let summary: Vec<_> = out
-            .iter()
-            .map(|c| {
-                (
-                    c.indices.len(),
-                    c.shape.length_m,
-                    c.whole.as_ref().map(|w| w.indices.len()),
-                )
-            })
-            .collect();
+        let (shaft, head) = shaft_and_head(&mut xy);
+        let bar = bar_across(&mut xy, 18.6, 0.74..=1.56);
+        let (out, summary) = peel_parts(&xy, &[&shaft, &head, &bar]);
         let on_bar =
             |c: &Candidate| c.indices.iter().filter(|i| bar.contains(i)).count() * 2 > c.indices.len();
         let bar_pieces: Vec<&Candidate> = out.iter().filter(|c| on_bar(c)).collect();
         assert!(
             !bar_pieces.is_empty() && bar_pieces.iter().all(|c| c.whole.is_none()),
-            "{summary:?}"
+            "{summary}"
         );
         let w = out
             .iter()
@@ -1928,7 +1915,7 @@ mod tests {
                 .copied()
                 .filter(|&i| side.contains(&xy[i][0]))
                 .collect();
-            assert!(part.iter().all(|i| w.indices.contains(i)), "{summary:?}");
+            assert!(part.iter().all(|i| w.indices.contains(i)), "{summary}");
         }
         let left = w.indices.iter().filter(|i| bar.contains(i)).count();
         assert!(

@@ -667,10 +667,7 @@ pub fn grow_with_barriers(
             let mean_conf = members.iter().map(|&m| items[m].conf).sum::<f64>() / members.len() as f64;
             let support = (members.len() as f64 / 4.0).max(painted / 20.0).min(1.0);
             let fit = (-(rms / 0.05).powi(2) / 2.0).exp();
-            let piece_class = match class {
-                LaneLineClass::SolidLine => MarkingClass::SolidLine,
-                LaneLineClass::DashedLine => MarkingClass::DashedLine,
-            };
+            let piece_class = class.marking_class();
             out.classes.extend(
                 members
                     .iter()

@@ -682,6 +682,14 @@ pub enum LaneLineClass {
 }
 
 impl LaneLineClass {
+    /// The class of the markings (pieces, dashes) a lane line of this class joins.
+    pub fn marking_class(self) -> MarkingClass {
+        match self {
+            LaneLineClass::SolidLine => MarkingClass::SolidLine,
+            LaneLineClass::DashedLine => MarkingClass::DashedLine,
+        }
+    }
+
     pub fn as_str(self) -> &'static str {
         match self {
             LaneLineClass::SolidLine => "solid_line",

@@ -1459,15 +1459,12 @@ fn arrows_on_lane_lines(pieces: &mut [Piece], lines: &[lanes::LaneResult]) {
         let Some(c) = outline::to_polygon(&p.marking.outline).centroid() else {
             continue;
         };
+        // A line without a segment is infinitely far (`locate_on`).
         let on = lines
             .iter()
-            .filter(|l| l.line.len() >= 2)
             .find(|l| locate_on(&l.line, [c.x(), c.y()]).0 <= ARROW_MIN_LANE_DISTANCE_M);
         if let Some(l) = on {
-            p.marking.class = match l.class {
-                LaneLineClass::SolidLine => MarkingClass::SolidLine,
-                LaneLineClass::DashedLine => MarkingClass::DashedLine,
-            };
+            p.marking.class = l.class.marking_class();
         }
     }
 }
@@ -2509,22 +2506,36 @@ mod tests {
             arrows_on_lane_lines(&mut pieces, &[line(l)]);
             pieces[0].marking.class
         };
-        assert_eq!(
-            class_of(10.0, 0.05, 0.55, LaneLineClass::DashedLine),
-            MarkingClass::DashedLine
-        );
-        assert_eq!(
-            class_of(38.6, -0.4, 0.1, LaneLineClass::SolidLine),
-            MarkingClass::SolidLine
-        );
-        assert_eq!(
-            class_of(10.0, 1.3, 2.1, LaneLineClass::SolidLine),
-            MarkingClass::StraightArrow
-        );
-        assert_eq!(
-            class_of(45.0, -0.2, 0.2, LaneLineClass::SolidLine),
-            MarkingClass::StraightArrow
-        );
+        for (x0, o0, o1, line_class, want) in [
+            (
+                10.0,
+                0.05,
+                0.55,
+                LaneLineClass::DashedLine,
+                MarkingClass::DashedLine,
+            ),
+            (38.6, -0.4, 0.1, LaneLineClass::SolidLine, MarkingClass::SolidLine),
+            (
+                10.0,
+                1.3,
+                2.1,
+                LaneLineClass::SolidLine,
+                MarkingClass::StraightArrow,
+            ),
+            (
+                45.0,
+                -0.2,
+                0.2,
+                LaneLineClass::SolidLine,
+                MarkingClass::StraightArrow,
+            ),
+        ] {
+            assert_eq!(
+                class_of(x0, o0, o1, line_class),
+                want,
+                "arrow at {x0}, {o0}..{o1}"
+            );
+        }
     }
 
     /// A 45 m gap of a solid lane line is bridged when the scanner did not see its course,
