@@ -36,6 +36,12 @@
 //!      bar overhanging both their ends (an arrow tip touching a stop line), or filled bars
 //!      ≥ 2 m long meeting it square (≥ 75°) on one side (a lane line ending on a stop line:
 //!      an L of two bars is no one painted object; a turning branch leaves at 45–65°).
+//!
+//!    Every part a rule returns is taken apart into its connected components (same radii
+//!    as step 1) before it is tested again: a valley or a line taken out of a component can
+//!    leave one part holding objects that only the line joined (two arrows 100 m apart whose
+//!    branches touch one edge line). Without this, which objects shared a cluster depended
+//!    on how far the streaming of the drive (`driver`) had grown the line.
 //! 3. **Stacked scan rows** (`join_rows`): at far range the scanner samples the road in
 //!    rows dense along them and 0.3–0.6 m apart across, so a crosswalk stripe becomes a
 //!    stack of short parallel one-row fragments (one per row crossing it). Fragments that
@@ -256,13 +262,39 @@ fn split(xy: &[[f64; 2]], idx: Vec<usize>, p: &Params, depth: u32) -> Vec<Vec<us
         None => vec![idx],
         Some(parts) => parts
             .into_iter()
-            .flat_map(|part| {
-                let mut sub: Vec<usize> = part.into_iter().map(|k| idx[k]).collect();
+            .flat_map(|part| connected_parts(xy, part.into_iter().map(|k| idx[k]).collect(), p))
+            .flat_map(|mut sub| {
                 canonical_sort(xy, &mut sub);
                 split(xy, sub, p, depth + 1)
             })
             .collect(),
     }
+}
+
+/// A part a rule split off, as the connected components it holds (with the radius of the
+/// clustering): a lateral valley or a line taken out of a component can leave two objects
+/// that only the line joined in one part (two arrows 100 m apart whose branches touch one
+/// edge line), and a cluster is one painted object. Components of fewer than
+/// `min_split_points` points stay with the largest (stray points of the part).
+fn connected_parts(xy: &[[f64; 2]], part: Vec<usize>, p: &Params) -> Vec<Vec<usize>> {
+    let pts: Vec<[f64; 2]> = part.iter().map(|&i| xy[i]).collect();
+    let mut comps = geom::components_adaptive(&pts, p.radius_m, p.max_radius_m, 2);
+    if comps.len() < 2 {
+        return vec![part];
+    }
+    comps.sort_by_key(|c| std::cmp::Reverse(c.len()));
+    let mut out: Vec<Vec<usize>> = Vec::new();
+    let mut stray: Vec<usize> = Vec::new();
+    for c in comps {
+        let g: Vec<usize> = c.into_iter().map(|k| part[k]).collect();
+        if out.is_empty() || g.len() >= p.min_split_points {
+            out.push(g);
+        } else {
+            stray.extend(g);
+        }
+    }
+    out[0].extend(stray);
+    out
 }
 
 /// Frame coordinates of all points.
@@ -1002,6 +1034,45 @@ mod tests {
         pts.extend(rect(-1.97, 0.1, 3.5, 0.15, 0.0, 0.03, 8));
         let c = run(&cloud(&pts), &Params::default());
         assert_eq!(c.len(), 2, "{:?}", sizes(&c));
+    }
+
+    /// Two turn arrows 40 m apart whose branches touch one edge line (a shaft 4 m × 0.2 m
+    /// 1.2 m beside the line, a branch 1.6 m × 0.3 m at 45° down to it): taking the line out
+    /// leaves both arrows on one side of it, and each must still be a cluster of its own.
+    #[test]
+    fn objects_split_off_one_line_far_apart_are_separate_clusters() {
+        let mut pts = rect(0.0, 0.0, 60.0, 0.15, 0.0, 0.03, 1);
+        let nline = pts.len();
+        let mut arrow_of = vec![None; nline];
+        for (k, x) in [-20.0, 20.0].into_iter().enumerate() {
+            let arrow = [
+                rect(x, 1.2, 4.0, 0.2, 0.0, 0.03, 20 + k as u64),
+                rect(x + 2.0 + 0.5, 0.6, 1.6, 0.3, -45.0, 0.03, 30 + k as u64),
+            ]
+            .concat();
+            arrow_of.extend(std::iter::repeat_n(Some(k), arrow.len()));
+            pts.extend(arrow);
+        }
+        let c = run(&cloud(&pts), &Params::default());
+        // Per cluster: its points of the line, of the first arrow and of the second.
+        let counts: Vec<[usize; 3]> = c
+            .iter()
+            .map(|cl| {
+                let mut n = [0; 3];
+                for &i in &cl.indices {
+                    n[arrow_of[i].map_or(0, |k| k + 1)] += 1;
+                }
+                n
+            })
+            .collect();
+        // The line may keep the branches' tips; no other cluster holds both arrows.
+        assert!(
+            counts.iter().all(|n| n[0] > nline / 2 || n[1].min(n[2]) == 0),
+            "{counts:?}"
+        );
+        let whole = |k: usize| counts.iter().map(|n| n[k]).max().unwrap_or(0);
+        let per_arrow = (pts.len() - nline) / 2;
+        assert!(whole(1) * 2 > per_arrow && whole(2) * 2 > per_arrow, "{counts:?}");
     }
 
     #[test]
