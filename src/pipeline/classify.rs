@@ -891,7 +891,10 @@ where
 /// `whole` (when no longer than a painted object), except where pieces are bars across the
 /// road ([`bars_across`]: an expansion joint through an arrow): the cluster without them
 /// falls into components, and each piece gets its component's whole (none for the bars, or
-/// for a piece alone in its component). Cost: O(m log m) for m points.
+/// for a piece alone in its component). In a cluster longer than a painted object, the
+/// pieces besides its long lines and bars are grouped at [`FRAGMENT_GAP_M`] and each group
+/// is its pieces' whole ([`set_rest_wholes`]: an arrow whose shaft a track took, beside the
+/// edge line its branch touched). Cost: O(m log m) for m points.
 fn peel_lines(
     c: Candidate,
     xy: &[[f64; 2]],
@@ -943,6 +946,7 @@ fn peel_lines(
     if out.is_empty() {
         return vec![describe(xy, intensity, rest, refl, p)];
     }
+    let lines_end = out.len();
     // Bars across the road that the lines passed through (an expansion joint through an
     // arrow and the lane lines): the same track search with mileage and offset swapped
     // finds a run of near-constant mileage across the offsets.
@@ -970,14 +974,27 @@ fn peel_lines(
         .map(|k| rest[k])
         .collect();
     let pts: Vec<[f64; 2]> = rest.iter().map(|&i| xy[i]).collect();
+    let peeled = out.len();
     for comp in geom::components(&pts, 0.25) {
         let idx: Vec<usize> = comp.into_iter().map(|k| rest[k]).collect();
         out.push(describe(xy, intensity, idx, refl, p));
     }
     let bars = bars_across(&out, p);
     if !bars.contains(&true) {
-        for piece in &mut out {
-            piece.whole.clone_from(&whole);
+        if whole.is_none() {
+            // The lines longer than a painted object and the bars are no part of a mark's
+            // whole; a shorter line track can be an arrow's shaft.
+            let apart: Vec<bool> = (0..out.len())
+                .map(|k| {
+                    (k < lines_end && out[k].shape.length_m > MAX_OBJECT_LENGTH_M)
+                        || (lines_end..peeled).contains(&k)
+                })
+                .collect();
+            set_rest_wholes(&mut out, &apart, xy, intensity, refl, p);
+        } else {
+            for piece in &mut out {
+                piece.whole.clone_from(&whole);
+            }
         }
         return out;
     }
@@ -1029,6 +1046,46 @@ fn peel_lines(
         piece.whole = pc.and_then(|ci| wholes[ci].clone());
     }
     out
+}
+
+/// Wholes of the pieces of a cluster too long to be one painted object, the pieces
+/// `apart` (its long lines and bars) left out: the pieces of one mark (an arrow's shaft,
+/// which a line track took, and the head halves it left) are grouped as in
+/// `group_fragments`, at most [`FRAGMENT_GAP_M`] apart, and a group of two pieces or more
+/// that is no longer than a painted object is their whole. The others get none.
+fn set_rest_wholes(
+    out: &mut [Candidate],
+    apart: &[bool],
+    xy: &[[f64; 2]],
+    intensity: &[f32],
+    refl: &RefLine,
+    p: &Params,
+) {
+    let mut pts: Vec<[f64; 2]> = Vec::new();
+    let mut piece_of: Vec<usize> = Vec::new();
+    for (k, piece) in out.iter().enumerate().filter(|&(k, _)| !apart[k]) {
+        pts.extend(piece.indices.iter().map(|&i| xy[i]));
+        piece_of.extend(std::iter::repeat_n(k, piece.indices.len()));
+    }
+    for comp in geom::components(&pts, FRAGMENT_GAP_M) {
+        let mut members: Vec<usize> = comp.iter().map(|&j| piece_of[j]).collect();
+        members.sort_unstable();
+        members.dedup();
+        if members.len() < 2 {
+            continue;
+        }
+        let idx: Vec<usize> = members
+            .iter()
+            .flat_map(|&k| out[k].indices.iter().copied())
+            .collect();
+        let w = describe(xy, intensity, idx, refl, p);
+        if w.shape.length_m <= MAX_OBJECT_LENGTH_M {
+            let w = Arc::new(w);
+            for &k in &members {
+                out[k].whole = Some(Arc::clone(&w));
+            }
+        }
+    }
 }
 
 /// A filled bar (fill ≥ 0.65, length ≥ 2.5 × width) of a stop line's width at ≥ 60° to
@@ -1883,6 +1940,32 @@ mod tests {
         for part in [&shaft, &head, &branch] {
             assert!(part.iter().all(|i| w.indices.contains(i)), "{summary}");
         }
+    }
+
+    /// The same arrow in one cluster with a 40 m edge line (an arrow whose branch touched the
+    /// line): the line and the shaft are peeled as line tracks, the head is left. The
+    /// cluster is too long to be the arrow's whole, yet shaft and head share one, without
+    /// the line; the line has none. Before, neither piece had a whole, and the shaft alone
+    /// went to the learned classifier.
+    #[test]
+    fn an_arrow_in_a_long_lines_cluster_keeps_a_whole() {
+        let mut xy: Vec<[f64; 2]> = Vec::new();
+        let (shaft, head) = shaft_and_head(&mut xy);
+        let line = block(&mut xy, 0.0, 40.0, -2.0, -1.85);
+        let (out, summary) = peel_parts(&xy, &[&shaft, &head, &line]);
+        let piece_of = |i: usize| out.iter().find(|c| c.indices.contains(&i)).expect("in a piece");
+        assert!(piece_of(line[0]).whole.is_none(), "{summary}");
+        let w = piece_of(shaft[0]).whole.as_ref().expect("the shaft has a whole");
+        let h = piece_of(head[head.len() / 2])
+            .whole
+            .as_ref()
+            .expect("the head has a whole");
+        assert!(Arc::ptr_eq(w, h), "{summary}");
+        assert!(w.indices.iter().all(|i| !line.contains(i)), "{summary}");
+        assert!(
+            w.indices.len() * 10 >= (shaft.len() + head.len()) * 9,
+            "{summary}"
+        );
     }
 
     /// The same arrow without a branch, the 10 m bar crossing its head instead of its
