@@ -25,7 +25,9 @@
 //!      that are themselves filled bars parallel to the line (a dash), or, on a line at
 //!      least 12 m long, filled bars at 20–70° to it (a gore area's chevrons, a hatched
 //!      island's stripes), so an arrow head or a combined arrow's branch is never cut from
-//!      its shaft;
+//!      its shaft; on a line at least 12 m long (longer than any arrow's shaft) also a part
+//!      of any shape at least 0.5 m wide, 0.15 m² and at most 10 m long (an arrow whose head
+//!      or branch reaches an edge line);
 //!    - *lateral valley*: the offsets from a smoothed centre (so curved pairs work) form two
 //!      modes separated by an almost empty valley (double lines, side-by-side dashes,
 //!      crosswalk stripes bridged by noise) → split at the valley; on short clusters the same
@@ -441,7 +443,19 @@ fn profile_split(pts: &[[f64; 2]], p: &Params) -> Option<Vec<Vec<usize>>> {
         // and branches stay on its shaft).
         let oblique = len >= OBLIQUE_LINE_MIN_LENGTH_M
             && bar.is_some_and(|(a, w)| (OBLIQUE_MIN_DEG..=OBLIQUE_MAX_DEG).contains(&a) && w >= 0.1);
-        if parallel || oblique {
+        // A mark that touches a long line with a part wider than paint lines (an arrow's
+        // head or branch reaching an edge line): no arrow's shaft is that long, so what
+        // sticks out is no part of the line.
+        let beside = len >= OBLIQUE_LINE_MIN_LENGTH_M && {
+            let s = BarShape::of(&part.iter().map(|&k| pts[k]).collect::<Vec<_>>());
+            let area = s.length() * s.width() * s.fill;
+            !is_filled_bar(&s)
+                && s.length() <= BESIDE_MAX_LENGTH_M
+                && s.width() >= BESIDE_MIN_WIDTH_M
+                && area >= BESIDE_MIN_AREA_M2
+                && part.len() as f64 >= 0.3 * density * area
+        };
+        if parallel || oblique || beside {
             out.push(part);
         } else {
             line.extend(part);
@@ -458,6 +472,12 @@ fn profile_split(pts: &[[f64; 2]], p: &Params) -> Option<Vec<Vec<usize>>> {
 /// Lines at least this long (m) have oblique stripes touching them split off (see
 /// [`profile_split`]); shorter clusters may be arrows, whose head and branches stay whole.
 const OBLIQUE_LINE_MIN_LENGTH_M: f64 = 12.0;
+/// Least width (m) and area (m²) of a part touching a long line that is split off it
+/// whatever its shape (see [`profile_split`]).
+const BESIDE_MIN_WIDTH_M: f64 = 0.5;
+const BESIDE_MIN_AREA_M2: f64 = 0.15;
+/// Longest such part (m): an arrow, not the stripes of a gore and the line they reach.
+const BESIDE_MAX_LENGTH_M: f64 = 10.0;
 /// Angles (deg) between such a stripe and the line: guideline stripes and chevrons, not
 /// crosswalk stripes (along or across the road) nor stop lines.
 const OBLIQUE_MIN_DEG: f64 = 20.0;
@@ -1073,6 +1093,28 @@ mod tests {
         let whole = |k: usize| counts.iter().map(|n| n[k]).max().unwrap_or(0);
         let per_arrow = (pts.len() - nline) / 2;
         assert!(whole(1) * 2 > per_arrow && whole(2) * 2 > per_arrow, "{counts:?}");
+    }
+
+    /// A right-turn arrow whose head touches a 150 m edge line (shaft 4 m × 0.2 m, 1.2 m
+    /// beside the line; its branch 1.6 m × 0.3 m at 45° down to the line; a 0.7 m head on
+    /// the branch's end): the arrow is no part of the line, though no rule for bars fits it
+    /// and its branch fills the lateral valley between it and the line.
+    #[test]
+    fn an_arrow_touching_a_long_line_is_split_off() {
+        let mut pts = rect(0.0, 0.0, 150.0, 0.15, 0.0, 0.03, 1);
+        let nline = pts.len();
+        pts.extend(rect(0.0, 1.2, 4.0, 0.2, 0.0, 0.03, 2));
+        pts.extend(rect(2.56, 0.6, 1.6, 0.3, -45.0, 0.03, 3));
+        pts.extend(rect(3.12, 0.35, 0.7, 0.7, -45.0, 0.03, 4));
+        let c = run(&cloud(&pts), &Params::default());
+        let line = c.iter().max_by_key(|c| c.indices.len()).expect("clusters");
+        let kept = line.indices.iter().filter(|&&i| i >= nline).count();
+        assert!(
+            kept * 5 < pts.len() - nline,
+            "{kept} of the arrow's {} points left on the line: {:?}",
+            pts.len() - nline,
+            sizes(&c)
+        );
     }
 
     #[test]
