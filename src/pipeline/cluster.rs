@@ -280,6 +280,11 @@ fn split(xy: &[[f64; 2]], idx: Vec<usize>, p: &Params, depth: u32) -> Vec<Vec<us
 /// `min_split_points` points stay with the largest (stray points of the part).
 fn connected_parts(xy: &[[f64; 2]], part: Vec<usize>, p: &Params) -> Vec<Vec<usize>> {
     let pts: Vec<[f64; 2]> = part.iter().map(|&i| xy[i]).collect();
+    // Connected at the least radius is connected at the adaptive one (it only joins more):
+    // the common case skips the neighbour search of the sparse points.
+    if geom::components(&pts, p.radius_m).len() < 2 {
+        return vec![part];
+    }
     let mut comps = geom::components_adaptive(&pts, p.radius_m, p.max_radius_m, 2);
     if comps.len() < 2 {
         return vec![part];
