@@ -893,7 +893,7 @@ where
 /// falls into components, and each piece gets its component's whole (none for the bars, or
 /// for a piece alone in its component). In a cluster longer than a painted object, the
 /// pieces besides its long lines and bars are grouped at [`FRAGMENT_GAP_M`] and each group
-/// is its pieces' whole ([`set_rest_wholes`]: an arrow whose shaft a track took, beside the
+/// is its pieces' whole ([`set_component_wholes`]: an arrow whose shaft a track took, beside the
 /// edge line its branch touched). Cost: O(m log m) for m points.
 fn peel_lines(
     c: Candidate,
@@ -980,40 +980,62 @@ fn peel_lines(
         out.push(describe(xy, intensity, idx, refl, p));
     }
     let bars = bars_across(&out, p);
-    if !bars.contains(&true) {
-        if whole.is_none() {
-            // The lines longer than a painted object and the bars are no part of a mark's
-            // whole; a shorter line track can be an arrow's shaft.
-            let apart: Vec<bool> = (0..out.len())
-                .map(|k| {
-                    (k < lines_end && out[k].shape.length_m > MAX_OBJECT_LENGTH_M)
-                        || (lines_end..peeled).contains(&k)
-                })
-                .collect();
-            set_rest_wholes(&mut out, &apart, xy, intensity, refl, p);
-        } else {
-            for piece in &mut out {
-                piece.whole.clone_from(&whole);
-            }
+    if bars.contains(&true) {
+        // The cluster without its bars falls into the marks the bars joined. A bar cuts what
+        // it crossed (an arrowhead) by its width and ragged edges: up to ~0.45 m apart, the
+        // parts are rejoined through the ragged points, which stay.
+        let mut in_bars: Vec<usize> = out
+            .iter()
+            .zip(&bars)
+            .filter(|(_, b)| **b)
+            .flat_map(|(piece, _)| piece.indices.iter().copied())
+            .collect();
+        in_bars.sort_unstable();
+        let kept: Vec<usize> = cluster
+            .into_iter()
+            .filter(|i| in_bars.binary_search(i).is_err())
+            .collect();
+        set_component_wholes(&mut out, &bars, &kept, xy, intensity, refl, p);
+    } else if whole.is_none() {
+        // Too long to be one mark: the lines longer than a painted object and the bars are
+        // no part of a mark's whole (a shorter line track can be an arrow's shaft), nor
+        // their ragged points, which would chain everything along them.
+        let apart: Vec<bool> = (0..out.len())
+            .map(|k| {
+                (k < lines_end && out[k].shape.length_m > MAX_OBJECT_LENGTH_M)
+                    || (lines_end..peeled).contains(&k)
+            })
+            .collect();
+        let kept: Vec<usize> = out
+            .iter()
+            .zip(&apart)
+            .filter(|(_, a)| !**a)
+            .flat_map(|(piece, _)| piece.indices.iter().copied())
+            .collect();
+        set_component_wholes(&mut out, &apart, &kept, xy, intensity, refl, p);
+    } else {
+        for piece in &mut out {
+            piece.whole.clone_from(&whole);
         }
-        return out;
     }
-    // The cluster without its bars falls into the marks the bars joined: each gets its own
-    // whole (when it holds two pieces or more, and is no longer than a painted object).
-    let mut in_bars: Vec<usize> = out
-        .iter()
-        .zip(&bars)
-        .filter(|(_, b)| **b)
-        .flat_map(|(piece, _)| piece.indices.iter().copied())
-        .collect();
-    in_bars.sort_unstable();
-    let kept: Vec<usize> = cluster
-        .into_iter()
-        .filter(|i| in_bars.binary_search(i).is_err())
-        .collect();
+    out
+}
+
+/// Wholes of the pieces of a peeled cluster by components: the points `kept` fall into
+/// components at [`FRAGMENT_GAP_M`] (the grouping distance of `group_fragments`); each piece
+/// not `apart` belongs to its first point's component, and a component holding two such
+/// pieces or more that is no longer than a painted object is their whole. The others get
+/// none.
+fn set_component_wholes(
+    out: &mut [Candidate],
+    apart: &[bool],
+    kept: &[usize],
+    xy: &[[f64; 2]],
+    intensity: &[f32],
+    refl: &RefLine,
+    p: &Params,
+) {
     let pts: Vec<[f64; 2]> = kept.iter().map(|&i| xy[i]).collect();
-    // A bar cuts what it crossed (an arrowhead) by its width and ragged edges: up to
-    // ~0.45 m apart, the parts are rejoined at the fragments' grouping distance.
     let comps = geom::components(&pts, FRAGMENT_GAP_M);
     let mut comp_of: std::collections::HashMap<usize, usize> =
         std::collections::HashMap::with_capacity(kept.len());
@@ -1024,9 +1046,9 @@ fn peel_lines(
     }
     let piece_comp: Vec<Option<usize>> = out
         .iter()
-        .zip(&bars)
-        .map(|(piece, &bar)| {
-            (!bar)
+        .zip(apart)
+        .map(|(piece, &apart)| {
+            (!apart)
                 .then(|| piece.indices.first().and_then(|i| comp_of.get(i).copied()))
                 .flatten()
         })
@@ -1044,47 +1066,6 @@ fn peel_lines(
         .collect();
     for (piece, pc) in out.iter_mut().zip(piece_comp) {
         piece.whole = pc.and_then(|ci| wholes[ci].clone());
-    }
-    out
-}
-
-/// Wholes of the pieces of a cluster too long to be one painted object, the pieces
-/// `apart` (its long lines and bars) left out: the pieces of one mark (an arrow's shaft,
-/// which a line track took, and the head halves it left) are grouped as in
-/// `group_fragments`, at most [`FRAGMENT_GAP_M`] apart, and a group of two pieces or more
-/// that is no longer than a painted object is their whole. The others get none.
-fn set_rest_wholes(
-    out: &mut [Candidate],
-    apart: &[bool],
-    xy: &[[f64; 2]],
-    intensity: &[f32],
-    refl: &RefLine,
-    p: &Params,
-) {
-    let mut pts: Vec<[f64; 2]> = Vec::new();
-    let mut piece_of: Vec<usize> = Vec::new();
-    for (k, piece) in out.iter().enumerate().filter(|&(k, _)| !apart[k]) {
-        pts.extend(piece.indices.iter().map(|&i| xy[i]));
-        piece_of.extend(std::iter::repeat_n(k, piece.indices.len()));
-    }
-    for comp in geom::components(&pts, FRAGMENT_GAP_M) {
-        let mut members: Vec<usize> = comp.iter().map(|&j| piece_of[j]).collect();
-        members.sort_unstable();
-        members.dedup();
-        if members.len() < 2 {
-            continue;
-        }
-        let idx: Vec<usize> = members
-            .iter()
-            .flat_map(|&k| out[k].indices.iter().copied())
-            .collect();
-        let w = describe(xy, intensity, idx, refl, p);
-        if w.shape.length_m <= MAX_OBJECT_LENGTH_M {
-            let w = Arc::new(w);
-            for &k in &members {
-                out[k].whole = Some(Arc::clone(&w));
-            }
-        }
     }
 }
 

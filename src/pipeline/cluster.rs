@@ -280,11 +280,6 @@ fn split(xy: &[[f64; 2]], idx: Vec<usize>, p: &Params, depth: u32) -> Vec<Vec<us
 /// `min_split_points` points stay with the largest (stray points of the part).
 fn connected_parts(xy: &[[f64; 2]], part: Vec<usize>, p: &Params) -> Vec<Vec<usize>> {
     let pts: Vec<[f64; 2]> = part.iter().map(|&i| xy[i]).collect();
-    // Connected at the least radius is connected at the adaptive one (it only joins more):
-    // the common case skips the neighbour search of the sparse points.
-    if geom::components(&pts, p.radius_m).len() < 2 {
-        return vec![part];
-    }
     let mut comps = geom::components_adaptive(&pts, p.radius_m, p.max_radius_m, 2);
     if comps.len() < 2 {
         return vec![part];
@@ -309,13 +304,7 @@ fn frame(pts: &[[f64; 2]], pca: &Pca) -> Vec<[f64; 2]> {
     pts.iter().map(|&q| pca.to_frame(q)).collect()
 }
 
-/// Is this part a filled bar (a dash, a stripe), and along which axis?
-fn filled_bar(pts: &[[f64; 2]]) -> Option<BarShape> {
-    let s = BarShape::of(pts);
-    is_filled_bar(&s).then_some(s)
-}
-
-/// Is this shape a filled bar (see [`filled_bar`])?
+/// Is this shape a filled bar (a dash, a stripe)?
 fn is_filled_bar(s: &BarShape) -> bool {
     s.length() >= 2.5 * s.width() && s.fill >= 0.7
 }
@@ -437,9 +426,11 @@ fn profile_split(pts: &[[f64; 2]], p: &Params) -> Option<Vec<Vec<usize>>> {
     for part in parts {
         // A filled bar at least 1 m long, about as dense as the line (not a sparse scatter
         // of stray points), at this angle (deg) to the line.
-        let bar = filled_bar(&part.iter().map(|&k| pts[k]).collect::<Vec<_>>())
-            .filter(|b| b.length() >= 1.0 && part.len() as f64 >= 0.3 * density * b.length() * b.width())
-            .map(|b| (geom::acute_angle_deg(b.pca.axis, pca.axis), b.width()));
+        let shape = BarShape::of(&part.iter().map(|&k| pts[k]).collect::<Vec<_>>());
+        let bar = (is_filled_bar(&shape)
+            && shape.length() >= 1.0
+            && part.len() as f64 >= 0.3 * density * shape.length() * shape.width())
+        .then(|| (geom::acute_angle_deg(shape.pca.axis, pca.axis), shape.width()));
         // A dash: parallel and as wide as a painted line (not a sliver shaved off the line's
         // own edge).
         let parallel = bar.is_some_and(|(a, w)| a <= 12.0 && w >= (0.4 * w0).max(0.06));
@@ -451,15 +442,13 @@ fn profile_split(pts: &[[f64; 2]], p: &Params) -> Option<Vec<Vec<usize>>> {
         // A mark that touches a long line with a part wider than paint lines (an arrow's
         // head or branch reaching an edge line): no arrow's shaft is that long, so what
         // sticks out is no part of the line.
-        let beside = len >= OBLIQUE_LINE_MIN_LENGTH_M && {
-            let s = BarShape::of(&part.iter().map(|&k| pts[k]).collect::<Vec<_>>());
-            let area = s.length() * s.width() * s.fill;
-            !is_filled_bar(&s)
-                && s.length() <= BESIDE_MAX_LENGTH_M
-                && s.width() >= BESIDE_MIN_WIDTH_M
-                && area >= BESIDE_MIN_AREA_M2
-                && part.len() as f64 >= 0.3 * density * area
-        };
+        let area = shape.length() * shape.width() * shape.fill;
+        let beside = len >= OBLIQUE_LINE_MIN_LENGTH_M
+            && !is_filled_bar(&shape)
+            && shape.length() <= BESIDE_MAX_LENGTH_M
+            && shape.width() >= BESIDE_MIN_WIDTH_M
+            && area >= BESIDE_MIN_AREA_M2
+            && part.len() as f64 >= 0.3 * density * area;
         if parallel || oblique || beside {
             out.push(part);
         } else {

@@ -183,7 +183,8 @@ pub fn components(xy: &[[f64; 2]], r: f64) -> Vec<Vec<usize>> {
 /// hence independent of the point order. Output as [`components`].
 pub fn components_adaptive(xy: &[[f64; 2]], r_min: f64, r_max: f64, k: usize) -> Vec<Vec<usize>> {
     let base = components(xy, r_min);
-    if r_max <= r_min || xy.is_empty() {
+    // The adaptive radius only joins components: one (or none) stays as it is.
+    if r_max <= r_min || base.len() < 2 {
         return base;
     }
     let mut label = vec![0usize; xy.len()];
