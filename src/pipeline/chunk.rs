@@ -18,8 +18,17 @@
 //! edges. With O at least that reach, a point of the core gets the same decision in any
 //! chunking. [`required_overlap_m`] computes the reach from the stage parameters.
 //!
-//! **Parameters** ([`Params`]): `length_m` 100, `overlap_m` 0 (= automatic: 1.5 × the
-//! stages' reach, at least 10 m, rounded up to whole slices), `memory_budget_mb` 1024.
+//! **Parameters** ([`Params`]): `length_m` 100, `overlap_m` 0 (= automatic: the stages'
+//! reach, at least 10 m, rounded up to whole slices), `memory_budget_mb` 1024.
+//!
+//! The automatic overlap is the reach itself, with no safety factor: a factor buys nothing
+//! because the only per-chunk statistic left (the background of a strip too sparse for its
+//! neighbours, which falls back to the whole head in the chunk) is not a matter of reach.
+//! Measured on a 1 km simulated drive (16.3 M points), the number of marking points found
+//! with overlaps of 10, 12, 14, 16, 20 and 30 m varies within 21 of 338 k with no trend in
+//! the overlap, while every metre of overlap on both sides adds 2 % of the points to the
+//! pavement, raster and threshold stages (an overlap of 14 m instead of 10 m: 28 % against
+//! 20 % more points than the drive, and 150 MB more peak memory).
 //!
 //! **Complexity.** O(n) copies and at most one write and one read of each point.
 
@@ -108,7 +117,7 @@ impl Plan {
         let overlap_m = if p.chunk.overlap_m > 0.0 {
             round(p.chunk.overlap_m)
         } else {
-            round((1.5 * required_overlap_m(p)).max(10.0))
+            round(required_overlap_m(p).max(10.0))
         };
         Self {
             length_m,
@@ -483,6 +492,23 @@ mod tests {
         let plan = Plan::new(&p, 0.0, 10.0);
         assert!(plan.overlap_m >= required_overlap_m(&p));
         assert_eq!(plan.overlap_m % p.pavement.slice_length_m, 0.0);
+    }
+
+    #[test]
+    fn automatic_overlap_adds_no_margin_beyond_the_reach() {
+        // A wider raster reach than the 10 m floor: the overlap is that reach rounded up
+        // to a whole slice, not more (every metre is 2 % more points per 100 m chunk).
+        let mut p = params(100.0, 0.0);
+        p.rasterize.background_window_slices = 6;
+        let need = required_overlap_m(&p);
+        assert!(need > 10.0, "{need}");
+        let plan = Plan::new(&p, 0.0, 10.0);
+        assert!(plan.overlap_m >= need);
+        assert!(
+            plan.overlap_m < need + p.pavement.slice_length_m,
+            "{} for {need}",
+            plan.overlap_m
+        );
     }
 
     #[test]
