@@ -862,7 +862,7 @@ mod tests {
         let thickness = 0.1;
         let mut keep: Vec<usize> = (0..n).filter(|i| i % 7 != 0).collect();
         let before = keep.clone();
-        drop_feet(&mut keep, &windows, &taken, &res, &pts, thickness, margin);
+        drop_feet(&mut keep, windows, taken, res, pts, thickness, margin);
         // Exhaustive: the face points are those above their window's level (own, else a
         // neighbour's), as drop_feet defines them.
         let level = |w: usize| {
