@@ -30,8 +30,10 @@
 //!      or branch reaches an edge line);
 //!    - *lateral valley*: the offsets from a smoothed centre (so curved pairs work) form two
 //!      modes separated by an almost empty valley (double lines, side-by-side dashes,
-//!      crosswalk stripes bridged by noise) → split at the valley; on short clusters the same
-//!      test runs along the axis (two collinear dashes bridged by noise);
+//!      crosswalk stripes bridged by noise) → split at the valley, unless the offsets are
+//!      a comb of evenly spaced thin rows (one mark sampled by scan rows running along
+//!      it); on short clusters the same test runs along the axis (two collinear dashes
+//!      bridged by noise);
 //!    - *crossing bar*: on short clusters, a Hough search over directions finds the densest
 //!      straight bar (≤ `max_bar_width_m`); parts attached to it are split off when they are
 //!      parallel filled bars, or perpendicular objects lying on one side of the bar with the
@@ -522,7 +524,13 @@ fn valley_split(pts: &[[f64; 2]], p: &Params) -> Option<Vec<Vec<usize>>> {
         })
         .collect();
     // Modes ≥ 0.2 m apart: two painted lines side by side (centre to centre ≥ 0.25 m for
-    // 0.1 m lines 0.15 m apart); closer modes are the scan pattern inside one line.
+    // 0.1 m lines 0.15 m apart); closer modes are the scan pattern inside one line. A
+    // mark sampled by scan rows running along it (a stripe across a side street, parallel
+    // to the scan lines) is a comb of evenly spaced rows with empty gaps between them: one
+    // object, not several.
+    if sampled_rows(&resid) {
+        return None;
+    }
     if let Some(cut) = find_valley(&resid, 0.02, 0.2, p) {
         let (a, b): (Vec<usize>, Vec<usize>) = (0..pts.len()).partition(|&i| resid[i] < cut);
         return Some(vec![a, b]);
@@ -535,6 +543,52 @@ fn valley_split(pts: &[[f64; 2]], p: &Params) -> Option<Vec<Vec<usize>>> {
         }
     }
     None
+}
+
+/// Largest spread (m) of one scan row's offsets across a mark it runs along (range noise
+/// and the row's slight slant), and the largest step between two offsets of one row.
+const ROW_MAX_WIDTH_M: f64 = 0.05;
+const ROW_MAX_STEP_M: f64 = 0.03;
+/// Most spacing (m) of the rows of one mark: farther apart they are separate marks.
+const ROW_MAX_SPACING_M: f64 = 0.4;
+
+/// Whether the offsets `vals` across a cluster are those of one mark sampled by scan rows
+/// along it: at least three thin bands (each at most [`ROW_MAX_WIDTH_M`] wide, bands
+/// separated by gaps wider than [`ROW_MAX_STEP_M`]) holding all but a few of the points,
+/// evenly spaced (every centre-to-centre spacing within 30 % of their median, which is at
+/// most [`ROW_MAX_SPACING_M`]). With the default row rate of the simulated scanners rows
+/// are 5 cm apart and never leave an empty valley inside a mark; at 100 lines/s they are
+/// 0.12-0.15 m apart, and `find_valley` cut each crosswalk stripe across a side street
+/// into its rows, which the classifier then dropped as steep one-row strokes. Two lines
+/// side by side (a double line, seen as one row each or as broad bands), and stripes
+/// bridged by noise (bands with one wide gap) are no such comb. Hand-written.
+fn sampled_rows(vals: &[f64]) -> bool {
+    let mut s = vals.to_vec();
+    s.sort_unstable_by(f64::total_cmp);
+    // Bands: runs of sorted offsets with steps of at most ROW_MAX_STEP_M.
+    let mut bands: Vec<(f64, f64, usize)> = Vec::new();
+    for &v in &s {
+        match bands.last_mut() {
+            Some(b) if v - b.1 <= ROW_MAX_STEP_M => {
+                b.1 = v;
+                b.2 += 1;
+            }
+            _ => bands.push((v, v, 1)),
+        }
+    }
+    // Stray points (noise beside the mark) are not rows; the rows hold the rest.
+    let min_row = 3.max(s.len() / 50);
+    let rows: Vec<&(f64, f64, usize)> = bands.iter().filter(|b| b.2 >= min_row).collect();
+    let in_rows: usize = rows.iter().map(|b| b.2).sum();
+    if rows.len() < 3 || in_rows * 20 < s.len() * 19 || rows.iter().any(|b| b.1 - b.0 > ROW_MAX_WIDTH_M) {
+        return false;
+    }
+    let spacing: Vec<f64> = rows
+        .windows(2)
+        .map(|w| 0.5 * (w[1].0 + w[1].1) - 0.5 * (w[0].0 + w[0].1))
+        .collect();
+    let med = geom::median(&mut spacing.clone());
+    med <= ROW_MAX_SPACING_M && spacing.iter().all(|d| (d - med).abs() <= 0.3 * med)
 }
 
 /// The cut position of an almost empty valley between two well-populated modes of `vals`
@@ -925,6 +979,36 @@ mod tests {
             ..Params::default()
         };
         assert_eq!(run(&cloud(&pts), &off).len(), 21);
+    }
+
+    /// A crosswalk stripe across a side street (4 m long, 0.45 m wide) lies along the scan
+    /// rows: at 100 lines/s it holds four rows 0.13 m apart, points every 5 cm along each
+    /// (with a little noise across). It stays one cluster; two such stripes 1.05 m apart
+    /// joined by a few noise points are still cut apart, and so is a double line (two 0.1 m
+    /// lines 0.2 m apart, one row each).
+    #[test]
+    fn a_stripe_sampled_by_rows_along_it_is_one_cluster() {
+        let mut jit = geom::test_jitter(3);
+        let stripe = |pts: &mut Vec<[f64; 2]>, y0: f64, rows: usize, jit: &mut dyn FnMut() -> f64| {
+            for r in 0..rows {
+                for k in 0..80 {
+                    pts.push([0.05 * k as f64, y0 + 0.13 * r as f64 + 0.005 * jit()]);
+                }
+            }
+        };
+        let mut one = Vec::new();
+        stripe(&mut one, 0.0, 4, &mut jit);
+        assert_eq!(sizes(&run(&cloud(&one), &Params::default())), vec![320]);
+        let mut two = one.clone();
+        stripe(&mut two, 1.05, 4, &mut jit);
+        two.extend((0..12).map(|k| [2.0, 0.45 + 0.05 * k as f64]));
+        let c = run(&cloud(&two), &Params::default());
+        assert!(c.len() >= 2, "{:?}", sizes(&c));
+        assert!(c.iter().all(|c| c.indices.len() <= 332), "{:?}", sizes(&c));
+        let mut double = Vec::new();
+        stripe(&mut double, 0.0, 1, &mut jit);
+        stripe(&mut double, 0.2, 1, &mut jit);
+        assert_eq!(sizes(&run(&cloud(&double), &Params::default())), vec![80, 80]);
     }
 
     #[test]

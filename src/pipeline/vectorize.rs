@@ -1686,11 +1686,15 @@ pub fn assemble(
             p.marking.class = MarkingClass::Unknown;
         }
     }
-    let pieces = if params.join_stop_lines {
+    let mut pieces = if params.join_stop_lines {
         join_stop_lines(pieces, &refl)
     } else {
         pieces
     };
+    // Again for the bars the join made: pieces of a joint across the road, each between
+    // two lines, are one bar across lanes whose lines run on through it once joined (a
+    // bridge joint across a ramp seen by scan rows along it, 15 m long).
+    stop_lines_crossed_by_lines(&mut pieces, &refl);
     let lane_pieces: Vec<LanePiece> = pieces
         .iter()
         .enumerate()
@@ -1714,7 +1718,6 @@ pub fn assemble(
         .map(|p| p.marking.outline.clone())
         .collect();
     let mut lanes = lanes::grow_with_barriers(&lane_pieces, traj_abs, &params.lane_lines, &barriers, seen);
-    let mut pieces = pieces;
     let first_fragment = pieces.len();
     pieces.extend(fragments);
     // The drive's dash designs, from the lane lines as grown (lines of fragments have none).
@@ -2294,6 +2297,35 @@ mod tests {
             &Params::default(),
             None,
         );
+        assert!(
+            marks.iter().any(|m| m.class == MarkingClass::StopLine),
+            "{marks:?}"
+        );
+    }
+
+    /// Two pieces of a joint across the road, each ending at a line on one side only, are
+    /// no crossed bars one by one; joined into one bar, a line runs through it, and it is
+    /// not reported.
+    #[test]
+    fn joined_bars_that_lane_lines_run_through_are_not_reported() {
+        let traj = crate::pipeline::types::test_straight_trajectory(100, -20.0);
+        let bar = |y0: f64, y1: f64| {
+            let mut b = rect(MarkingClass::StopLine, 30.0, 30.3, y0, y1);
+            (b.marking.width_m, b.marking.length_m) = (0.3, y1 - y0);
+            b
+        };
+        let lines = || (0..3).map(|k| shifted(solid(0.0, 60.0), 3.5 * k as f64));
+        let mut pieces: Vec<Piece> = lines().collect();
+        pieces.extend([bar(1.0, 3.4), bar(3.6, 6.0)]);
+        let (marks, _) = assemble(pieces, &traj, &Params::default(), None);
+        assert!(
+            marks.iter().all(|m| m.class == MarkingClass::SolidLine),
+            "{marks:?}"
+        );
+        // One piece alone stays a stop line.
+        let mut pieces: Vec<Piece> = lines().collect();
+        pieces.push(bar(1.0, 3.4));
+        let (marks, _) = assemble(pieces, &traj, &Params::default(), None);
         assert!(
             marks.iter().any(|m| m.class == MarkingClass::StopLine),
             "{marks:?}"
