@@ -594,9 +594,11 @@ fn sampled_rows(vals: &[f64]) -> bool {
 /// The cut position of an almost empty valley between two well-populated modes of `vals`
 /// (bin `bin` m, modes at least `min_sep` m apart), or None.
 fn find_valley(vals: &[f64], bin: f64, min_sep: f64, p: &Params) -> Option<f64> {
-    let mut s: Vec<f64> = vals.to_vec();
-    s.sort_unstable_by(f64::total_cmp);
-    let (lo, hi) = (s[0], s[s.len() - 1]);
+    let (lo, hi) = vals
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
     let nb = ((hi - lo) / bin).ceil() as usize + 1;
     if !(5..=20_000).contains(&nb) {
         return None;

@@ -26,23 +26,24 @@
 //! `assemble`, in order: crosswalk stripes put on their crossing's design (`crosswalks`:
 //! common width and edges, worn fragments absorbed, missing stripes filled); stop lines
 //! that are not clearly paint (median contrast below `stop_line_min_contrast`) made
-//! `unknown`; "stop lines" along the road at the offset of a line piece they continue
-//! made line pieces (a far line's sparse pieces read as bars); stop lines joined with the
-//! marks on their centre line (`stoplines`); "stop lines" across the road that a lane line runs on through made
-//! `unknown` and dropped at the end (no paint: expansion joints, seams); lane-line growth with crosswalks and stop lines as barriers; bars across the
-//! road wholly beyond the outermost lane line on their side (a side street's centre line,
-//! dashes, crossing stripes) made `unknown`; marks named arrows on a lane line's course
-//! (arrows are painted mid-lane) given the line's class; lane lines of line fragments alone (pieces
-//! flagged [`Piece::fragment`], too small for markings: a far lane's dashes seen as one
-//! scan row each) where they fall on the drive's dash design (`fragment_lines`), other
-//! fragments dropped; line pieces whose width the points do not
+//! `unknown`; "stop lines" along the road at the offset of a line piece they continue made
+//! line pieces (a far line's sparse pieces read as bars); stop lines joined with the marks
+//! on their centre line (`stoplines`); "stop lines" across the road that a lane line runs
+//! on through made `unknown` and dropped at the end (no paint: expansion joints, seams;
+//! checked again after the join); lane-line growth with crosswalks and stop lines as
+//! barriers; bars across the road wholly beyond the outermost lane line on their side (a
+//! side street's centre line, dashes, crossing stripes) made `unknown`; marks named arrows
+//! on a lane line's course (arrows are painted mid-lane) given the line's class; lane lines
+//! of line fragments alone (pieces flagged [`Piece::fragment`], too small for markings: a
+//! far lane's dashes seen as one scan row each) where they fall on the drive's dash design
+//! (`fragment_lines`), other fragments dropped; line pieces whose width the points do not
 //! resolve widened to their lane line's width and drawn along its course; gaps of solid
-//! lane lines bridged (short
-//! ones always, long ones between longer pieces, and up to `lane_lines.max_unseen_gap_m`
-//! where the scanner saw no bare asphalt on the gap's course); dashes put on their line's design
-//! (`dashes`); solid lane lines that end where the scanner stopped seeing their course run
-//! on to the stop line or crossing ahead (`extend_to_bars`: cars queued beside the survey
-//! vehicle at a junction hide the lines' last metres); `unknown` markings that are not clearly paint (median contrast over the
+//! lane lines bridged (short ones always, long ones between longer pieces, and up to
+//! `lane_lines.max_unseen_gap_m` where the scanner saw no bare asphalt on the gap's
+//! course); dashes put on their line's design (`dashes`); solid lane lines that end where
+//! the scanner stopped seeing their course run on to the stop line or crossing ahead
+//! (`extend_to_bars`: cars queued beside the survey vehicle at a junction hide the lines'
+//! last metres); `unknown` markings that are not clearly paint (median contrast over the
 //! asphalt below `unknown_min_contrast`) dropped, and guideline stripes with no other
 //! within 3 m (hatching comes in groups; a lone stripe is a streak); ids in driving order.
 //!
@@ -1796,8 +1797,8 @@ pub fn assemble(
     // A fragment not placed on a painted dash (`regularise_dashes` clears the flag of those
     // it places) is dropped: off the lane lines it is noise, on one it says where the line
     // runs, not where its paint is. So is a part of a painted dash another piece stands
-    // for, a piece known to be no paint, and an `unknown` marking that is not clearly paint. At the end (after the lane
-    // context had its say on classes), so keys stay put.
+    // for, a piece known to be no paint, and an `unknown` marking that is not clearly
+    // paint. At the end (after the lane context had its say on classes), so keys stay put.
     let mut dropped: Vec<bool> = pieces
         .iter()
         .map(|p| p.fragment || p.not_paint || faint(p, MarkingClass::Unknown, params.unknown_min_contrast))
@@ -2277,11 +2278,7 @@ mod tests {
     #[test]
     fn bars_that_lane_lines_run_through_are_not_reported() {
         let traj = crate::pipeline::types::test_straight_trajectory(100, -20.0);
-        let bar = || {
-            let mut b = rect(MarkingClass::StopLine, 30.0, 30.3, -1.75, 5.25);
-            (b.marking.width_m, b.marking.length_m) = (0.3, 7.0);
-            b
-        };
+        let bar = || bar_across(30.0, 0.3, -1.75, 5.25);
         let (marks, lines) = assemble(
             vec![bar(), shifted(solid(0.0, 60.0), 1.75)],
             &traj,
@@ -2291,12 +2288,7 @@ mod tests {
         assert_eq!(lines.len(), 1, "{lines:?}");
         assert_eq!(marks.len(), 1, "{marks:?}");
         assert_eq!(marks[0].class, MarkingClass::SolidLine);
-        let (marks, _) = assemble(
-            vec![bar(), shifted(solid(0.0, 29.5), 1.75)],
-            &traj,
-            &Params::default(),
-            None,
-        );
+        let marks = marks_of(vec![bar(), shifted(solid(0.0, 29.5), 1.75)]);
         assert!(
             marks.iter().any(|m| m.class == MarkingClass::StopLine),
             "{marks:?}"
@@ -2308,24 +2300,19 @@ mod tests {
     /// not reported.
     #[test]
     fn joined_bars_that_lane_lines_run_through_are_not_reported() {
-        let traj = crate::pipeline::types::test_straight_trajectory(100, -20.0);
-        let bar = |y0: f64, y1: f64| {
-            let mut b = rect(MarkingClass::StopLine, 30.0, 30.3, y0, y1);
-            (b.marking.width_m, b.marking.length_m) = (0.3, y1 - y0);
-            b
+        let with_lines = |bars: &[(f64, f64)]| -> Vec<Piece> {
+            (0..3)
+                .map(|k| shifted(solid(0.0, 60.0), 3.5 * k as f64))
+                .chain(bars.iter().map(|&(y0, y1)| bar_across(30.0, 0.3, y0, y1)))
+                .collect()
         };
-        let lines = || (0..3).map(|k| shifted(solid(0.0, 60.0), 3.5 * k as f64));
-        let mut pieces: Vec<Piece> = lines().collect();
-        pieces.extend([bar(1.0, 3.4), bar(3.6, 6.0)]);
-        let (marks, _) = assemble(pieces, &traj, &Params::default(), None);
+        let marks = marks_of(with_lines(&[(1.0, 3.4), (3.6, 6.0)]));
         assert!(
             marks.iter().all(|m| m.class == MarkingClass::SolidLine),
             "{marks:?}"
         );
         // One piece alone stays a stop line.
-        let mut pieces: Vec<Piece> = lines().collect();
-        pieces.push(bar(1.0, 3.4));
-        let (marks, _) = assemble(pieces, &traj, &Params::default(), None);
+        let marks = marks_of(with_lines(&[(1.0, 3.4)]));
         assert!(
             marks.iter().any(|m| m.class == MarkingClass::StopLine),
             "{marks:?}"
@@ -2411,16 +2398,24 @@ mod tests {
         assert_eq!(marks.len(), 4);
     }
 
-    /// A bar across the road is a stop line only where its points are clearly paint: one at
-    /// 1.9 times the asphalt (a worn stop line) stays one, one at 1.55 (the edge of a
-    /// resurfaced strip) becomes `unknown`, and one at 1.4 is then dropped as a faint
-    /// `unknown`; with the parameter at 0 all three are stop lines.
-    /// A stop line across the road (y −1.75 to 5.25) from x0, `w` wide, its measured width
-    /// too.
+    /// A stop line across the road (y −1.75 to 5.25) from x0, `w` wide.
     fn stop_bar(x0: f64, w: f64) -> Piece {
-        let mut p = rect(MarkingClass::StopLine, x0, x0 + w, -1.75, 5.25);
-        p.marking.width_m = w;
+        bar_across(x0, w, -1.75, 5.25)
+    }
+
+    /// A stop line across the road from x0, `w` wide, over y0..y1, its measured width and
+    /// length too.
+    fn bar_across(x0: f64, w: f64, y0: f64, y1: f64) -> Piece {
+        let mut p = rect(MarkingClass::StopLine, x0, x0 + w, y0, y1);
+        (p.marking.width_m, p.marking.length_m) = (w, y1 - y0);
         p
+    }
+
+    /// The markings `assemble` makes of `pieces` beside the test trajectory (default
+    /// parameters).
+    fn marks_of(pieces: Vec<Piece>) -> Vec<Marking> {
+        let traj = crate::pipeline::types::test_straight_trajectory(100, -20.0);
+        assemble(pieces, &traj, &Params::default(), None).0
     }
 
     /// (smallest x, class) of each marking, in order of x.
@@ -2438,6 +2433,10 @@ mod tests {
         v
     }
 
+    /// A bar across the road is a stop line only where its points are clearly paint: one at
+    /// 1.9 times the asphalt (a worn stop line) stays one, one at 1.55 (the edge of a
+    /// resurfaced strip) becomes `unknown`, and one at 1.4 is then dropped as a faint
+    /// `unknown`; with the parameter at 0 all three are stop lines.
     #[test]
     fn faint_bars_are_no_stop_lines() {
         let traj = crate::pipeline::types::test_straight_trajectory(100, -20.0);
