@@ -7,7 +7,9 @@
 use roadmark::pipeline::PointCloud;
 use roadmark::pipeline::classify::{self, Candidate, Shape};
 use roadmark::pipeline::cluster;
-use roadmark::pipeline::learned::{Classifier, ClusterPoints, FEATURES_PER_POINT, refine, runtime};
+use roadmark::pipeline::learned::{
+    Classifier, ClusterPoints, FEATURES_PER_POINT, Prediction, refine, runtime,
+};
 use roadmark::pipeline::types::{MarkingClass, Pose, Trajectory};
 use roadmark::sim::markings::{self, ArrowKind, Frame2, Paint, Standard};
 
@@ -281,6 +283,17 @@ fn candidate(
     }
 }
 
+/// The network's prediction for one cluster.
+fn network_says(cloud: &PointCloud, indices: &[usize], direction: [f64; 2]) -> Vec<Prediction> {
+    classifier()
+        .classify(&[ClusterPoints {
+            cloud,
+            indices,
+            direction,
+        }])
+        .unwrap()
+}
+
 #[test]
 fn refine_names_undecided_candidates_and_keeps_decisive_ones() {
     let dir: [f64; 2] = [0.6, 0.8];
@@ -422,13 +435,7 @@ fn a_confident_dash_is_overruled_only_into_a_painted_object_the_network_is_sure_
         })
         .collect();
     let bar = fill(&mut cloud, &bar, 0.0);
-    let said = classifier()
-        .classify(&[ClusterPoints {
-            cloud: &cloud,
-            indices: &bar,
-            direction: dir,
-        }])
-        .unwrap();
+    let said = network_says(&cloud, &bar, dir);
     assert_eq!(said[0].class, MarkingClass::Crosswalk, "{said:?}");
     // Even with the overrule confidence below the network's, the class is not one a dash
     // may become.
@@ -777,4 +784,45 @@ fn an_arrow_grouped_with_a_passing_line_piece_is_put_back_together_without_it() 
     assert_eq!(cands[0].class, MarkingClass::StraightArrow, "{classes:?}");
     assert_eq!(cands[0].indices.len(), arrow.len());
     assert_eq!(cands[1].indices, line);
+}
+
+/// The network names a candidate a crosswalk stripe only when its rectangle is no wider than
+/// a stripe (`crosswalk_max_width_m`): sparse far blobs of road noise 1–3 m wide read as
+/// stripes. The same points, a 5 × 0.45 m stripe, as a 0.45 m wide candidate become one; as a
+/// 1.2 m wide one (what such a blob measures) they keep their geometric class.
+#[test]
+fn a_candidate_wider_than_a_stripe_is_no_crosswalk_stripe() {
+    let dir: [f64; 2] = [0.6, 0.8];
+    let (s, c) = (dir[1], dir[0]);
+    let mut cloud = PointCloud::with_origin([500_000.0, 4_000_000.0, 10.0]);
+    let poly: Vec<[f64; 2]> = rect(0.0, 0.0, 5.0, 0.45)
+        .iter()
+        .map(|p| [p[0] * c - p[1] * s, p[0] * s + p[1] * c])
+        .collect();
+    let idx = fill(&mut cloud, &poly, 0.0);
+    let direct = network_says(&cloud, &idx, dir);
+    assert_eq!(direct[0].class, MarkingClass::Crosswalk, "{direct:?}");
+    let params = refine::Params {
+        mode: refine::Mode::On,
+        ..refine::Params::default()
+    };
+    let mut cands: Vec<Candidate> = [0.45, 1.2]
+        .iter()
+        .map(|&w| {
+            let mut k = candidate(&cloud, idx.clone(), MarkingClass::Unknown, 0.0, dir);
+            k.shape.width_m = w;
+            k
+        })
+        .collect();
+    refine::refine(&mut cands, &cloud, &params).unwrap();
+    assert_eq!(cands[0].class, MarkingClass::Crosswalk);
+    assert_eq!(cands[1].class, MarkingClass::Unknown);
+    // The bound is a parameter.
+    let wide = refine::Params {
+        crosswalk_max_width_m: 1.5,
+        ..params
+    };
+    let mut again = vec![cands[1].clone()];
+    refine::refine(&mut again, &cloud, &wide).unwrap();
+    assert_eq!(again[0].class, MarkingClass::Crosswalk);
 }
