@@ -1713,11 +1713,12 @@ pub fn assemble(
             })
         })
         .collect();
-    let barriers: Vec<Vec<[f64; 2]>> = pieces
+    let mut barriers: Vec<Vec<[f64; 2]>> = pieces
         .iter()
         .filter(|p| matches!(p.marking.class, MarkingClass::StopLine | MarkingClass::Crosswalk))
         .map(|p| p.marking.outline.clone())
         .collect();
+    barriers.extend(side_crossing_mouths(&pieces, &refl));
     let mut lanes = lanes::grow_with_barriers(&lane_pieces, traj_abs, &params.lane_lines, &barriers, seen);
     let first_fragment = pieces.len();
     pieces.extend(fragments);
@@ -1865,6 +1866,70 @@ pub fn assemble(
         })
         .collect();
     (markings, lane_lines)
+}
+
+/// How far (m) toward the road a side street's crossing is widened into the barrier of
+/// its mouth ([`side_crossing_mouths`]): crossings of a side street are set back from the
+/// main road's edge line by a metre or two (1.3–1.4 m on the simulated junctions); a lane
+/// line of the main road is a lane width (≥ 2.75 m) inside its edge line.
+const SIDE_CROSSING_REACH_M: f64 = 2.5;
+/// Least number of stripes of a side street's crossing, and the largest gap (m) along the
+/// road between neighbouring stripes of one crossing.
+const SIDE_CROSSING_MIN_STRIPES: usize = 3;
+const SIDE_CROSSING_MAX_GAP_M: f64 = 1.5;
+
+/// The mouths of side streets, as barriers to lane-line growth (outlines): a crossing of a
+/// side street is a row of crosswalk stripes that lie across the road (each at least twice
+/// as long across as along it), all on one side of the trajectory, each within
+/// [`SIDE_CROSSING_MAX_GAP_M`] along the road of the next; at least
+/// [`SIDE_CROSSING_MIN_STRIPES`] of them. Its box in the trajectory frame, widened by
+/// [`SIDE_CROSSING_REACH_M`] toward the road, is the mouth: the main road's edge line ends
+/// there and starts again beyond the side street, so it is not joined across it, however
+/// well its pieces on both sides align (on the simulated junctions the edge line ran 30 m
+/// across the mouth, a metre from the ends of the crossing's stripes). The crossings of the
+/// road itself lie along it and are barriers as they are.
+fn side_crossing_mouths(pieces: &[Piece], refl: &RefLine) -> Vec<Vec<[f64; 2]>> {
+    let mut stripes: Vec<[f64; 4]> = pieces
+        .iter()
+        .filter(|p| p.marking.class == MarkingClass::Crosswalk && p.marking.outline.len() >= 3)
+        .map(|p| so_box(&p.marking.outline, refl))
+        .filter(|b| b[3] - b[2] >= 2.0 * (b[1] - b[0]) && (b[2] > 0.0 || b[3] < 0.0))
+        .collect();
+    stripes.sort_by(|a, b| a[0].total_cmp(&b[0]));
+    let mut mouths = Vec::new();
+    for side in [1.0, -1.0] {
+        let mut row: Option<([f64; 4], usize)> = None;
+        let mut close = |row: Option<([f64; 4], usize)>| {
+            if let Some(([s0, s1, o0, o1], n)) = row
+                && n >= SIDE_CROSSING_MIN_STRIPES
+            {
+                let (o0, o1) = if side > 0.0 {
+                    (o0 - SIDE_CROSSING_REACH_M, o1)
+                } else {
+                    (o0, o1 + SIDE_CROSSING_REACH_M)
+                };
+                mouths.push(vec![
+                    refl.point(s0, o0),
+                    refl.point(s1, o0),
+                    refl.point(s1, o1),
+                    refl.point(s0, o1),
+                ]);
+            }
+        };
+        for b in stripes.iter().filter(|b| side * b[2] > 0.0) {
+            row = match row {
+                Some((r, n)) if b[0] <= r[1] + SIDE_CROSSING_MAX_GAP_M => {
+                    Some(([r[0], r[1].max(b[1]), r[2].min(b[2]), r[3].max(b[3])], n + 1))
+                }
+                other => {
+                    close(other);
+                    Some((*b, 1))
+                }
+            };
+        }
+        close(row);
+    }
+    mouths
 }
 
 /// The bars across the road, in the trajectory frame [s0, s1, o0, o1]: stop lines lying
@@ -2396,6 +2461,50 @@ mod tests {
         };
         let (marks, _) = assemble(pieces(), &traj, &off, None);
         assert_eq!(marks.len(), 4);
+    }
+
+    /// The edge line at y −5.3 breaks for a side street (x 30–50) whose crossing, stripes
+    /// across the road from x 32 to 48, begins `set_back` metres beyond it: set back 1.4 m
+    /// (as on the simulated junctions) the line is not joined across the mouth; set back
+    /// 4 m it is (no mouth is known so far from the line), and so it is without the
+    /// crossing.
+    #[test]
+    fn an_edge_line_is_not_joined_across_a_side_streets_mouth() {
+        let traj = crate::pipeline::types::test_straight_trajectory(100, -20.0);
+        let lines_with = |set_back: Option<f64>| {
+            let mut pieces = vec![shifted(solid(0.0, 30.0), -5.3), shifted(solid(50.0, 80.0), -5.3)];
+            if let Some(b) = set_back {
+                pieces.extend((0..17).map(|k| {
+                    rect(
+                        MarkingClass::Crosswalk,
+                        32.0 + k as f64,
+                        32.45 + k as f64,
+                        -14.0,
+                        -5.3 - b,
+                    )
+                }));
+            }
+            let (_, lanes) = assemble(pieces, &traj, &Params::default(), None);
+            let mut spans: Vec<(f64, f64)> = lanes
+                .iter()
+                .map(|l| {
+                    (
+                        l.line[0][0].min(l.line[l.line.len() - 1][0]),
+                        l.line[0][0].max(l.line[l.line.len() - 1][0]),
+                    )
+                })
+                .collect();
+            spans.sort_by(|a, b| a.0.total_cmp(&b.0));
+            spans
+        };
+        let two = lines_with(Some(1.4));
+        assert_eq!(two.len(), 2, "{two:?}");
+        assert!(two[0].1 <= 31.0 && two[1].0 >= 49.0, "{two:?}");
+        for far in [Some(4.0), None] {
+            let one = lines_with(far);
+            assert_eq!(one.len(), 1, "{far:?}: {one:?}");
+            assert!(one[0].0 <= 1.0 && one[0].1 >= 79.0, "{far:?}: {one:?}");
+        }
     }
 
     /// A stop line across the road (y −1.75 to 5.25) from x0, `w` wide.
