@@ -76,7 +76,10 @@
 //!    are averaged with their neighbours while a bending line keeps the narrow fit); across
 //!    gaps wider than the bandwidth a cubic Hermite joins the fitted ends (values and
 //!    slopes, fitted over a quarter of the gap, 2–10 m, never less than the bandwidth), so
-//!    the line follows the road's curvature through occlusions. Sampled every `vertex_spacing_m`, mapped back through
+//!    the line follows the road's curvature through occlusions; across gaps of at least
+//!    8 m that another line within 25 m is painted along (`Guide`), the line follows that
+//!    line's course instead, at a difference interpolated linearly (the vehicle's sway,
+//!    which the trajectory frame carries, is the same for both). Sampled every `vertex_spacing_m`, mapped back through
 //!    the reference frame and simplified (Douglas–Peucker, `simplify_tolerance_m`).
 //! 5. Lane lines shorter than `min_length_m` (a dashed stretch split off a chain at least
 //!    that long is held to the chain's length) or whose pieces cover less than
@@ -636,6 +639,7 @@ pub fn grow_with_barriers(
     let chains = merge_parallel_chains(&items, chains);
     let chains = absorb_fragments(&items, chains, p, &boxes);
     let mut out = Lanes::default();
+    let mut accepted: Vec<(LaneLineClass, Vec<usize>, f64)> = Vec::new();
     for mut chain in chains {
         chain.sort_by(|&a, &b| items[a].so[0][0].total_cmp(&items[b].so[0][0]).then(a.cmp(&b)));
         let regs = regimes(&items, &chain, p, seen.map(|_| &gap_at as &dyn Fn(_, _) -> Gap));
@@ -660,7 +664,22 @@ pub fn grow_with_barriers(
             if painted < p.min_paint_share * (s1 - s0) || scant_solid {
                 continue;
             }
-            let (line, rms) = centreline(&items, &members, &refl, p, class == LaneLineClass::DashedLine);
+            accepted.push((class, members, painted));
+        }
+    }
+    // Every line's paint guides the others across their long gaps (see `Guide`).
+    let guides: Vec<Guide> = accepted.iter().map(|(_, m, _)| Guide::new(&items, m)).collect();
+    for (k, (class, members, painted)) in accepted.into_iter().enumerate() {
+        {
+            let others = |j: usize| j != k;
+            let (line, rms) = centreline(
+                &items,
+                &members,
+                &refl,
+                p,
+                class == LaneLineClass::DashedLine,
+                (&guides, &others),
+            );
             if line.len() < 2 {
                 continue;
             }
@@ -1436,6 +1455,106 @@ fn dashed_bandwidth(
     }
 }
 
+/// Shortest gap (m) of a line that another line's paint guides across ([`Guide`]): shorter
+/// gaps (a dash gap, a car) are bridged by the Hermite of the fitted ends.
+const GUIDE_MIN_GAP_M: f64 = 8.0;
+/// Farthest (m) a guide may lie from the line at the start of its gap (also for the lines
+/// of fragments, `vectorize::fragment_lines`): the sway is the vehicle's, the same at any
+/// offset; a far carriageway's lines lie 13–21 m from the near one's on the simulated
+/// highways.
+pub(crate) const GUIDE_MAX_DISTANCE_M: f64 = 25.0;
+/// Longest unpainted stretch (m) of a guide within the gap it guides (a dash gap, GB 9 m,
+/// MUTCD 30 ft, with a margin), and how far (m) short of the gap's ends its paint may stop.
+const GUIDE_MAX_HOLE_M: f64 = 12.0;
+const GUIDE_END_SLACK_M: f64 = 2.0;
+/// Bandwidth (m) of a guide's offset fit, well under the sway of a vehicle in its lane
+/// (tens of metres); across a dashed guide's gaps `geom::local_linear` widens it until it
+/// holds enough samples.
+const GUIDE_BANDWIDTH_M: f64 = 2.0;
+
+/// The members' extents along s.
+fn member_intervals(items: &[Item], members: &[usize]) -> Vec<(f64, f64)> {
+    members
+        .iter()
+        .map(|&m| (items[m].so[0][0], items[m].so[items[m].so.len() - 1][0]))
+        .collect()
+}
+
+/// Intervals sorted and merged where one starts at most `join` after the last ends.
+pub(crate) fn merge_intervals(mut ivs: Vec<(f64, f64)>, join: f64) -> Vec<(f64, f64)> {
+    ivs.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut merged: Vec<(f64, f64)> = Vec::new();
+    for iv in ivs {
+        match merged.last_mut() {
+            Some(l) if iv.0 <= l.1 + join => l.1 = l.1.max(iv.1),
+            _ => merged.push(iv),
+        }
+    }
+    merged
+}
+
+/// Share of [a, b] covered by the merged, ordered intervals `painted`.
+pub(crate) fn painted_share(painted: &[(f64, f64)], a: f64, b: f64) -> f64 {
+    if b <= a {
+        return 0.0;
+    }
+    painted
+        .iter()
+        .map(|iv| (iv.1.min(b) - iv.0.max(a)).max(0.0))
+        .sum::<f64>()
+        / (b - a)
+}
+
+/// A lane line's paint as a guide for the others. In the trajectory frame a straight line
+/// is not at a constant offset: the vehicle sways in its lane (on a simulated highway a far
+/// line's offset rose by 0.24 m and fell back over 60 m), so a line interpolated across a
+/// 40 m gap from its ends alone ran up to 0.29 m off (beyond the 0.15 m a lane line is held
+/// to). Lines painted all along such a gap sway the same way: across a gap of at least
+/// [`GUIDE_MIN_GAP_M`], the nearest line within [`GUIDE_MAX_DISTANCE_M`] whose paint covers
+/// the gap (holes ≤ [`GUIDE_MAX_HOLE_M`], ends within [`GUIDE_END_SLACK_M`]) carries the
+/// line: its offset plus the line's difference from it at the gap's ends, interpolated
+/// linearly (two lines that converge, a lane drop, converge linearly).
+struct Guide {
+    xs: Vec<f64>,
+    ys: Vec<f64>,
+    ws: Vec<f64>,
+    /// Painted intervals along s, merged, in order.
+    painted: Vec<(f64, f64)>,
+}
+
+impl Guide {
+    fn new(items: &[Item], members: &[usize]) -> Self {
+        let mut so = samples_of(items, members);
+        so.sort_by(|a, b| a[0].total_cmp(&b[0]));
+        let painted = merge_intervals(member_intervals(items, members), 0.0);
+        Self {
+            xs: so.iter().map(|q| q[0]).collect(),
+            ys: so.iter().map(|q| q[1]).collect(),
+            ws: vec![1.0; so.len()],
+            painted,
+        }
+    }
+
+    /// Whether the paint covers [a, b] up to holes of [`GUIDE_MAX_HOLE_M`].
+    fn covers(&self, a: f64, b: f64) -> bool {
+        let inside: Vec<&(f64, f64)> = self
+            .painted
+            .iter()
+            .filter(|iv| iv.1 >= a - GUIDE_END_SLACK_M && iv.0 <= b + GUIDE_END_SLACK_M)
+            .collect();
+        let (Some(first), Some(last)) = (inside.first(), inside.last()) else {
+            return false;
+        };
+        first.0 <= a + GUIDE_END_SLACK_M
+            && last.1 >= b - GUIDE_END_SLACK_M
+            && inside.windows(2).all(|w| w[1].0 - w[0].1 <= GUIDE_MAX_HOLE_M)
+    }
+
+    fn offset(&self, s: f64) -> Option<f64> {
+        geom::local_linear(&self.xs, &self.ys, &self.ws, s, GUIDE_BANDWIDTH_M, 3.0).map(|f| f.0)
+    }
+}
+
 /// Smooth centreline through the pieces; returns the polyline and the samples' RMS residual.
 fn centreline(
     items: &[Item],
@@ -1443,6 +1562,7 @@ fn centreline(
     refl: &RefLine,
     p: &Params,
     dashed: bool,
+    (guides, usable): (&[Guide], &dyn Fn(usize) -> bool),
 ) -> (Vec<[f64; 2]>, f64) {
     // (s, o, member) samples sorted by s.
     let mut tagged: Vec<(f64, f64, usize)> = members
@@ -1463,18 +1583,7 @@ fn centreline(
     };
     let fit = |s: f64| geom::local_linear(&xs, &ys, &ws, s, h, 3.0).unwrap_or((0.0, 0.0));
     // Painted intervals (merged), to find the gaps that need a Hermite bridge.
-    let mut ivs: Vec<(f64, f64)> = members
-        .iter()
-        .map(|&m| (items[m].so[0][0], items[m].so[items[m].so.len() - 1][0]))
-        .collect();
-    ivs.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let mut painted: Vec<(f64, f64)> = Vec::new();
-    for iv in ivs {
-        match painted.last_mut() {
-            Some(l) if iv.0 <= l.1 + 2.0 * h => l.1 = l.1.max(iv.1),
-            _ => painted.push(iv),
-        }
-    }
+    let painted = merge_intervals(member_intervals(items, members), 2.0 * h);
     let (s0, s1) = (xs[0], xs[xs.len() - 1]);
     let nv = ((s1 - s0) / p.vertex_spacing_m).ceil().max(1.0) as usize;
     let mut stations: Vec<f64> = (0..=nv).map(|i| s0 + (s1 - s0) * i as f64 / nv as f64).collect();
@@ -1498,6 +1607,29 @@ fn centreline(
             (wide(a), wide(b))
         })
         .collect();
+    // The guide of each long gap: the nearest other line painted all along it.
+    let gap_guides: Vec<Option<&Guide>> = painted
+        .windows(2)
+        .zip(&gap_ends)
+        .map(|(w, &((oa, _), _))| {
+            let (a, b) = (w[0].1, w[1].0);
+            if b - a < GUIDE_MIN_GAP_M {
+                return None;
+            }
+            guides
+                .iter()
+                .enumerate()
+                .filter(|&(j, g)| usable(j) && g.covers(a, b))
+                .filter_map(|(_, g)| Some((g, (g.offset(a)? - oa).abs())))
+                .filter(|&(_, d)| d <= GUIDE_MAX_DISTANCE_M)
+                .max_by(|x, y| {
+                    painted_share(&x.0.painted, a, b)
+                        .total_cmp(&painted_share(&y.0.painted, a, b))
+                        .then(y.1.total_cmp(&x.1))
+                })
+                .map(|(g, _)| g)
+        })
+        .collect();
     let offset_at = |s: f64| -> f64 {
         let k = painted.partition_point(|iv| iv.1 < s);
         if k < painted.len() && s >= painted[k].0 {
@@ -1506,11 +1638,19 @@ fn centreline(
         if k == 0 || k >= painted.len() {
             return fit(s).0;
         }
-        // In the gap between painted[k-1] and painted[k]: cubic Hermite.
+        // In the gap between painted[k-1] and painted[k]: along the guide, the difference
+        // from it interpolated linearly; without one, a cubic Hermite.
         let (a, b) = (painted[k - 1].1, painted[k].0);
         let ((oa, ta), (ob, tb)) = gap_ends[k - 1];
         let l = b - a;
         let t = ((s - a) / l).clamp(0.0, 1.0);
+        if let Some(g) = gap_guides[k - 1]
+            && let (Some(ga), Some(gb), Some(gs)) = (g.offset(a), g.offset(b), g.offset(s))
+        {
+            // The ends as fitted locally: the guide, not a wide fit, carries the shape.
+            let (fa, fb) = (fit(a).0, fit(b).0);
+            return gs + (fa - ga) + t * ((fb - gb) - (fa - ga));
+        }
         let (t2, t3) = (t * t, t * t * t);
         (2.0 * t3 - 3.0 * t2 + 1.0) * oa
             + (t3 - 2.0 * t2 + t) * l * ta
@@ -1566,6 +1706,56 @@ mod tests {
             width_m: 0.15,
             confidence: 0.9,
         }
+    }
+
+    /// In the trajectory frame lane lines sway with the vehicle (here 0.3 m over a 30 m
+    /// wavelength). A line with a 30 m gap beside a line painted all along follows that
+    /// line's sway through the gap (within 3 cm); alone, the Hermite of its ends does not
+    /// (0.42 m off).
+    #[test]
+    fn a_long_gap_follows_the_sway_of_a_line_painted_beside_it() {
+        let sway = |x: f64| 0.3 * (2.0 * std::f64::consts::PI * x / 30.0).sin();
+        let swaying = |key: usize, x0: f64, x1: f64, y: f64| LanePiece {
+            key,
+            class: MarkingClass::SolidLine,
+            centerline: (0..=((x1 - x0) * 2.0) as usize)
+                .map(|i| {
+                    let x = x0 + 0.5 * i as f64;
+                    [x, y + sway(x)]
+                })
+                .collect(),
+            width_m: 0.15,
+            confidence: 0.9,
+        };
+        let gapped = vec![swaying(0, 0.0, 30.0, 2.0), swaying(1, 60.0, 90.0, 2.0)];
+        let guide = swaying(2, 0.0, 90.0, -1.5);
+        let worst_in_gap = |pieces: &[LanePiece]| {
+            let lanes = grow(pieces, &traj(), &Params::default());
+            let line = lanes
+                .lines
+                .iter()
+                .find(|l| l.pieces.contains(&0))
+                .expect("the gapped line");
+            assert!(line.pieces.contains(&1), "one line across the gap");
+            line.line
+                .windows(2)
+                .flat_map(|w| {
+                    (0..10).map(move |k| {
+                        let t = k as f64 / 10.0;
+                        [
+                            w[0][0] + t * (w[1][0] - w[0][0]),
+                            w[0][1] + t * (w[1][1] - w[0][1]),
+                        ]
+                    })
+                })
+                .filter(|q| q[0] > 31.0 && q[0] < 59.0)
+                .map(|q| (q[1] - 2.0 - sway(q[0])).abs())
+                .fold(0.0, f64::max)
+        };
+        let guided = worst_in_gap(&[gapped.clone(), vec![guide]].concat());
+        assert!(guided < 0.05, "{guided}");
+        let alone = worst_in_gap(&gapped);
+        assert!(alone > 0.1, "{alone}");
     }
 
     /// Two 1 m solid pieces 16 m apart make no lane line (2 m of paint); three pieces of

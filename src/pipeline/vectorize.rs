@@ -838,7 +838,8 @@ fn dash_spans(l: &lanes::LaneResult, pieces: &[Piece]) -> Vec<dashes::Span> {
 /// the trajectory frame (see [`fragment_chains`]: at least `FRAGMENT_LINE_MIN` pieces). A
 /// chain over at least `FRAGMENT_LINE_MIN_LENGTH_M` becomes a lane line: its pieces' offsets
 /// smoothed over `FRAGMENT_LINE_SMOOTHING_M`, refitted without pieces off it by more than
-/// `FRAGMENT_TOLERANCE_M`, and dropped if it drifts across the road by more than
+/// `FRAGMENT_TOLERANCE_M` (the line itself: the course of a painted lane line beside it
+/// plus the smoothed difference from it, where one is), and dropped if it drifts across the road by more than
 /// `FRAGMENT_PARALLEL_M` relative to the lane line beside it (whose drift is its
 /// least-squares slope over the overlap: a bridged gap may wiggle). It is kept, dashed, only
 /// where its pieces fall on one phase of
@@ -895,6 +896,19 @@ fn fragment_lines(
             let mut so: Vec<[f64; 2]> = l.line.iter().map(|&q| refl.locate(q)).collect();
             so.sort_by(|a, b| a[0].total_cmp(&b[0]));
             so.into_iter().map(|q| (q[0], q[1])).unzip()
+        })
+        .collect();
+    // The lane lines' painted intervals along the trajectory (their pieces' extents).
+    let ref_paint: Vec<Vec<(f64, f64)>> = lanes
+        .lines
+        .iter()
+        .map(|l| {
+            let ivs = l.pieces.iter().filter_map(|&k| {
+                let cl = pieces[k].centerline.as_ref().filter(|c| c.len() >= 2)?;
+                let (u, v) = (refl.locate(cl[0])[0], refl.locate(cl[cl.len() - 1])[0]);
+                Some((u.min(v), u.max(v)))
+            });
+            lanes::merge_intervals(ivs.collect(), 0.0)
         })
         .collect();
     free.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.2.cmp(&b.2)));
@@ -969,11 +983,36 @@ fn fragment_lines(
             }
         }
         let (a, b) = (xs[0] - 3.0, xs[xs.len() - 1] + 3.0);
+        // The guide: of the lane lines spanning at least 90 % of it within
+        // `GUIDE_MAX_DISTANCE_M`, the most painted along it (at least
+        // FRAGMENT_GUIDE_MIN_PAINT), then the nearest. The line is the guide's course plus
+        // the smoothed difference from it (see `lanes::Guide`: the vehicle's sway, which the
+        // 25 m smoothing of the fragments' own offsets flattens).
+        let mid = 0.5 * (c0 + c1);
+        let guide = ref_so
+            .iter()
+            .zip(&ref_paint)
+            .filter(|((ms, _), _)| match (ms.first(), ms.last()) {
+                (Some(&u), Some(&v)) => v.min(b) - u.max(a) >= 0.9 * (b - a),
+                _ => false,
+            })
+            .map(|((ms, os), pt)| {
+                (
+                    ms,
+                    os,
+                    (geom::interp_clamped(ms, os, mid) - o_mid).abs(),
+                    lanes::painted_share(pt, a, b),
+                )
+            })
+            .filter(|g| g.2 <= lanes::GUIDE_MAX_DISTANCE_M && g.3 >= FRAGMENT_GUIDE_MIN_PAINT)
+            .max_by(|x, y| x.3.total_cmp(&y.3).then(y.2.total_cmp(&x.2)));
+        let g_at = |st: f64| guide.map_or(0.0, |(ms, os, _, _)| geom::interp_clamped(ms, os, st));
+        let rel: Vec<f64> = xs.iter().zip(&ys).map(|(&x, &y)| y - g_at(x)).collect();
         let nv = (b - a).ceil().max(1.0) as usize;
         let line: Vec<[f64; 2]> = (0..=nv)
             .map(|v| {
                 let st = a + (b - a) * v as f64 / nv as f64;
-                refl.point(st, fit(&xs, &ys, &ws, st))
+                refl.point(st, g_at(st) + fit(&xs, &rel, &ws, st))
             })
             .collect();
         let mut l = lanes::LaneResult {
@@ -1116,6 +1155,9 @@ const FRAGMENT_PARALLEL_M: f64 = 0.5;
 /// Bandwidth (m) of a line of fragments' offset fit: a far fragment is a few returns of
 /// one scan row, centimetres off the paint's axis, so the line averages several.
 const FRAGMENT_LINE_SMOOTHING_M: f64 = 25.0;
+/// Least share of a line of fragments' extent a lane line guiding it must be painted over
+/// (MUTCD dashes: 10 ft every 40 ft).
+const FRAGMENT_GUIDE_MIN_PAINT: f64 = 0.25;
 /// Confidence of a lane line of fragments.
 const FRAGMENT_CONFIDENCE_LINE: f64 = 0.4;
 /// Longest gap (m) between consecutive pieces of a line of fragments: three 15 m periods of
@@ -2867,6 +2909,39 @@ mod tests {
                 .iter()
                 .all(|l| l.line.iter().all(|q| (q[1] - 18.0).abs() > 0.5))
         );
+    }
+
+    /// The drive's lines sway in the trajectory frame with the vehicle (0.3 m over a 100 m
+    /// wavelength here). A far line seen as one fragment per dash follows the sway of the
+    /// near dashed lines 21 m away (within 0.1 m); its fragments' own offsets smoothed over
+    /// 25 m flatten it (0.30 m off).
+    #[test]
+    fn a_far_line_of_fragments_follows_the_sway_of_the_near_lines() {
+        let traj = crate::pipeline::types::test_straight_trajectory(300, -20.0);
+        let sway = |x: f64| 0.3 * (2.0 * std::f64::consts::PI * x / 100.0).sin();
+        let mut pieces: Vec<Piece> = near_dashed_lines()
+            .into_iter()
+            .map(|p| {
+                let x = p.centerline.as_ref().map_or(0.0, |c| 0.5 * (c[0][0] + c[1][0]));
+                shifted(p, sway(x))
+            })
+            .collect();
+        for (k, &at) in FAR_FRAGMENT_AT.iter().enumerate() {
+            let x = 3.0 + 15.0 * k as f64 + at;
+            pieces.push(fragment(x, 22.75 + sway(x + 0.3)));
+        }
+        let (_, lines) = assemble(pieces, &traj, &Params::default(), None);
+        let far = lines
+            .iter()
+            .find(|l| l.line.iter().all(|q| (q[1] - 22.75).abs() < 0.5))
+            .expect("a lane line of the far fragments");
+        let worst = far
+            .line
+            .iter()
+            .filter(|q| q[0] > 10.0 && q[0] < 230.0)
+            .map(|q| (q[1] - 22.75 - sway(q[0])).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < 0.1, "{worst}");
     }
 
     /// A far line seen as one fragment per 6/9 m dash, two dashes in a row unseen after the
