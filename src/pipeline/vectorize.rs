@@ -944,10 +944,40 @@ fn fragment_lines(
         let fit = |xs: &[f64], ys: &[f64], ws: &[f64], st: f64| {
             geom::local_linear(xs, ys, ws, st, FRAGMENT_LINE_SMOOTHING_M, 3.0).map_or(ys[0], |f| f.0)
         };
+        // The guide: of the lane lines spanning at least 90 % of the chain within
+        // `GUIDE_MAX_DISTANCE_M`, the most painted along it (at least
+        // FRAGMENT_GUIDE_MIN_PAINT), then the nearest. The line is the guide's course plus
+        // the smoothed difference from it (see `lanes::Guide`: the vehicle's sway, which the
+        // 25 m smoothing of the fragments' own offsets flattens), and the fragments off it
+        // are judged by their difference from it.
+        let (a, b) = (xs[0] - 3.0, xs[xs.len() - 1] + 3.0);
+        let mid = 0.5 * (xs[0] + xs[xs.len() - 1]);
+        let o_first = fit(&xs, &ys, &ws, mid);
+        let guide = ref_so
+            .iter()
+            .zip(&ref_paint)
+            .filter(|((ms, _), _)| match (ms.first(), ms.last()) {
+                (Some(&u), Some(&v)) => v.min(b) - u.max(a) >= 0.9 * (b - a),
+                _ => false,
+            })
+            .map(|((ms, os), pt)| {
+                (
+                    ms,
+                    os,
+                    (geom::interp_clamped(ms, os, mid) - o_first).abs(),
+                    lanes::painted_share(pt, a, b),
+                )
+            })
+            .filter(|g| g.2 <= lanes::GUIDE_MAX_DISTANCE_M && g.3 >= FRAGMENT_GUIDE_MIN_PAINT)
+            .max_by(|x, y| x.3.total_cmp(&y.3).then(y.2.total_cmp(&x.2)));
+        let g_at = |st: f64| guide.map_or(0.0, |(ms, os, _, _)| geom::interp_clamped(ms, os, st));
+        let rel_of =
+            |xs: &[f64], ys: &[f64]| -> Vec<f64> { xs.iter().zip(ys).map(|(&x, &y)| y - g_at(x)).collect() };
+        let rel = rel_of(&xs, &ys);
         keys.retain(|&k| {
             let mut r: Vec<f64> = (0..xs.len())
                 .filter(|&i| owner[i] == k)
-                .map(|i| (ys[i] - fit(&xs, &ys, &ws, xs[i])).abs())
+                .map(|i| (rel[i] - fit(&xs, &rel, &ws, xs[i])).abs())
                 .collect();
             !r.is_empty() && geom::median(&mut r) <= FRAGMENT_TOLERANCE_M
         });
@@ -983,31 +1013,7 @@ fn fragment_lines(
             }
         }
         let (a, b) = (xs[0] - 3.0, xs[xs.len() - 1] + 3.0);
-        // The guide: of the lane lines spanning at least 90 % of it within
-        // `GUIDE_MAX_DISTANCE_M`, the most painted along it (at least
-        // FRAGMENT_GUIDE_MIN_PAINT), then the nearest. The line is the guide's course plus
-        // the smoothed difference from it (see `lanes::Guide`: the vehicle's sway, which the
-        // 25 m smoothing of the fragments' own offsets flattens).
-        let mid = 0.5 * (c0 + c1);
-        let guide = ref_so
-            .iter()
-            .zip(&ref_paint)
-            .filter(|((ms, _), _)| match (ms.first(), ms.last()) {
-                (Some(&u), Some(&v)) => v.min(b) - u.max(a) >= 0.9 * (b - a),
-                _ => false,
-            })
-            .map(|((ms, os), pt)| {
-                (
-                    ms,
-                    os,
-                    (geom::interp_clamped(ms, os, mid) - o_mid).abs(),
-                    lanes::painted_share(pt, a, b),
-                )
-            })
-            .filter(|g| g.2 <= lanes::GUIDE_MAX_DISTANCE_M && g.3 >= FRAGMENT_GUIDE_MIN_PAINT)
-            .max_by(|x, y| x.3.total_cmp(&y.3).then(y.2.total_cmp(&x.2)));
-        let g_at = |st: f64| guide.map_or(0.0, |(ms, os, _, _)| geom::interp_clamped(ms, os, st));
-        let rel: Vec<f64> = xs.iter().zip(&ys).map(|(&x, &y)| y - g_at(x)).collect();
+        let rel = rel_of(&xs, &ys);
         let nv = (b - a).ceil().max(1.0) as usize;
         let line: Vec<[f64; 2]> = (0..=nv)
             .map(|v| {
@@ -2933,7 +2939,7 @@ mod tests {
         let (_, lines) = assemble(pieces, &traj, &Params::default(), None);
         let far = lines
             .iter()
-            .find(|l| l.line.iter().all(|q| (q[1] - 22.75).abs() < 0.5))
+            .find(|l| l.line.iter().all(|q| (q[1] - 22.75).abs() < 1.0))
             .expect("a lane line of the far fragments");
         let worst = far
             .line
