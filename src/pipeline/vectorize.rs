@@ -1843,6 +1843,8 @@ pub fn assemble(
         );
         pieces.extend(runs);
     }
+    // After the dashes were put on each line's design (a line of fragments has its own).
+    join_dashed_lines(&mut lanes.lines, &barriers, &refl);
     // A fragment not placed on a painted dash (`regularise_dashes` clears the flag of those
     // it places) is dropped: off the lane lines it is noise, on one it says where the line
     // runs, not where its paint is. So is a part of a painted dash another piece stands
@@ -1925,6 +1927,85 @@ const SIDE_CROSSING_REACH_M: f64 = 2.5;
 /// road between neighbouring stripes of one crossing.
 const SIDE_CROSSING_MIN_STRIPES: usize = 3;
 const SIDE_CROSSING_MAX_GAP_M: f64 = 1.5;
+
+/// Longest gap (m) between two dashed lane lines [`join_dashed_lines`] joins (a dash gap,
+/// GB 9 m, MUTCD 30 ft, plus a metre), their longest overlap (m), and the largest offset
+/// difference (m) where they meet.
+const JOIN_DASHED_MAX_GAP_M: f64 = 10.5;
+const JOIN_DASHED_MAX_OVERLAP_M: f64 = 3.0;
+const JOIN_DASHED_MAX_OFFSET_M: f64 = 0.15;
+
+/// Dashed lane lines that continue one another are one line: one that starts within
+/// [`JOIN_DASHED_MAX_GAP_M`] after another ends (or overlaps its end by at most
+/// [`JOIN_DASHED_MAX_OVERLAP_M`]), at the same offset (within
+/// [`JOIN_DASHED_MAX_OFFSET_M`] where they meet), with no barrier between them, is appended
+/// to it. A far line grown partly from whole dashes and partly from fragments
+/// ([`fragment_lines`]) came as several lines end to end (the 1 km drive's far dashed line
+/// in four). The joined line keeps both lines' pieces and the length-weighted mean
+/// confidence.
+fn join_dashed_lines(lines: &mut Vec<lanes::LaneResult>, barriers: &[Vec<[f64; 2]>], refl: &RefLine) {
+    let so_of = |l: &lanes::LaneResult| -> Vec<[f64; 2]> { l.line.iter().map(|&v| refl.locate(v)).collect() };
+    let boxes: Vec<[f64; 4]> = barriers
+        .iter()
+        .filter(|r| !r.is_empty())
+        .map(|r| so_box(r, refl))
+        .collect();
+    loop {
+        let sos: Vec<Vec<[f64; 2]>> = lines.iter().map(so_of).collect();
+        let mut best: Option<(usize, usize, f64)> = None;
+        for (a, la) in lines.iter().enumerate() {
+            if la.class != LaneLineClass::DashedLine || sos[a].len() < 2 {
+                continue;
+            }
+            let end = sos[a][sos[a].len() - 1];
+            for (b, lb) in lines.iter().enumerate() {
+                if b == a || lb.class != LaneLineClass::DashedLine || sos[b].len() < 2 {
+                    continue;
+                }
+                let start = sos[b][0];
+                let gap = start[0] - end[0];
+                if !(-JOIN_DASHED_MAX_OVERLAP_M..=JOIN_DASHED_MAX_GAP_M).contains(&gap)
+                    || sos[b][sos[b].len() - 1][0] <= end[0]
+                    || sos[a][0][0] >= start[0]
+                {
+                    continue;
+                }
+                // Offsets where they meet: each line's at the other's end.
+                let (sa, oa): (Vec<f64>, Vec<f64>) = sos[a].iter().map(|q| (q[0], q[1])).unzip();
+                let (sb, ob): (Vec<f64>, Vec<f64>) = sos[b].iter().map(|q| (q[0], q[1])).unzip();
+                let at = 0.5 * (end[0] + start[0]);
+                let dev = (geom::interp_clamped(&sa, &oa, at) - geom::interp_clamped(&sb, &ob, at)).abs();
+                let o = 0.5 * (end[1] + start[1]);
+                let blocked = boxes.iter().any(|q| {
+                    q[0] < start[0].max(end[0]) + 0.5
+                        && q[1] > start[0].min(end[0]) - 0.5
+                        && o >= q[2] - 0.5
+                        && o <= q[3] + 0.5
+                });
+                if dev <= JOIN_DASHED_MAX_OFFSET_M && !blocked && best.is_none_or(|x| dev < x.2) {
+                    best = Some((a, b, dev));
+                }
+            }
+        }
+        let Some((a, b, _)) = best else { break };
+        let lb = lines[b].clone();
+        let start_b = sos[b][0][0];
+        let la = &mut lines[a];
+        let keep: Vec<[f64; 2]> = la
+            .line
+            .iter()
+            .zip(&sos[a])
+            .filter(|(_, q)| q[0] < start_b)
+            .map(|(&v, _)| v)
+            .collect();
+        let (len_a, len_b) = (la.length_m, lb.length_m);
+        la.line = keep.into_iter().chain(lb.line.iter().copied()).collect();
+        la.length_m = geom::polyline_length(&la.line);
+        la.confidence = (la.confidence * len_a + lb.confidence * len_b) / (len_a + len_b).max(1e-9);
+        la.pieces.extend(lb.pieces.iter().copied());
+        lines.remove(b);
+    }
+}
 
 /// The mouths of side streets, as barriers to lane-line growth (outlines): a crossing of a
 /// side street is a row of crosswalk stripes that lie across the road (each at least twice
@@ -2509,6 +2590,61 @@ mod tests {
         };
         let (marks, _) = assemble(pieces(), &traj, &off, None);
         assert_eq!(marks.len(), 4);
+    }
+
+    /// Dashed lane lines end to end at one offset are one line: 8 m apart (a dash gap) or
+    /// overlapping by 2 m they are joined, keeping all their pieces; 0.5 m across, across a
+    /// stop line, 15 m apart, or solid, they are not.
+    #[test]
+    fn dashed_lines_end_to_end_are_joined() {
+        let traj = crate::pipeline::types::test_straight_trajectory(300, -20.0);
+        let refl = RefLine::new(&traj);
+        let line = |x0: f64, x1: f64, y: f64, key: usize, class: LaneLineClass| lanes::LaneResult {
+            class,
+            line: vec![[x0, y], [0.5 * (x0 + x1), y], [x1, y]],
+            confidence: 0.8,
+            length_m: x1 - x0,
+            pieces: vec![key],
+            start: [x0, y],
+        };
+        let d = LaneLineClass::DashedLine;
+        let mut lines = vec![
+            line(0.0, 50.0, 3.0, 0, d),
+            line(58.0, 100.0, 3.0, 1, d),
+            line(98.0, 130.0, 3.0, 2, d),
+            line(130.0, 160.0, 3.5, 3, d),
+            line(175.0, 200.0, 3.5, 4, d),
+            line(0.0, 100.0, -3.0, 5, LaneLineClass::SolidLine),
+            line(108.0, 150.0, -3.0, 6, LaneLineClass::SolidLine),
+            line(0.0, 60.0, -6.0, 7, d),
+            line(64.0, 120.0, -6.0, 8, d),
+        ];
+        let stop = vec![[61.0, -7.0], [61.5, -7.0], [61.5, -5.0], [61.0, -5.0]];
+        join_dashed_lines(&mut lines, &[stop], &refl);
+        let mut keys: Vec<Vec<usize>> = lines.iter().map(|l| l.pieces.clone()).collect();
+        keys.sort();
+        assert_eq!(
+            keys,
+            vec![
+                vec![0, 1, 2],
+                vec![3],
+                vec![4],
+                vec![5],
+                vec![6],
+                vec![7],
+                vec![8]
+            ]
+        );
+        let joined = lines
+            .iter()
+            .find(|l| l.pieces.len() == 3)
+            .expect("one joined line");
+        assert!((joined.length_m - 130.0).abs() < 0.01, "{}", joined.length_m);
+        assert!(
+            joined.line.windows(2).all(|w| w[1][0] > w[0][0]),
+            "{:?}",
+            joined.line
+        );
     }
 
     /// The edge line at y −5.3 breaks for a side street (x 30–50) whose crossing, stripes
