@@ -1944,67 +1944,82 @@ const JOIN_DASHED_MAX_OFFSET_M: f64 = 0.15;
 /// in four). The joined line keeps both lines' pieces and the length-weighted mean
 /// confidence.
 fn join_dashed_lines(lines: &mut Vec<lanes::LaneResult>, barriers: &[Vec<[f64; 2]>], refl: &RefLine) {
-    let so_of = |l: &lanes::LaneResult| -> Vec<[f64; 2]> { l.line.iter().map(|&v| refl.locate(v)).collect() };
     let boxes: Vec<[f64; 4]> = barriers
         .iter()
         .filter(|r| !r.is_empty())
         .map(|r| so_box(r, refl))
         .collect();
-    loop {
-        let sos: Vec<Vec<[f64; 2]>> = lines.iter().map(so_of).collect();
-        let mut best: Option<(usize, usize, f64)> = None;
-        for (a, la) in lines.iter().enumerate() {
-            if la.class != LaneLineClass::DashedLine || sos[a].len() < 2 {
-                continue;
-            }
-            let end = sos[a][sos[a].len() - 1];
-            for (b, lb) in lines.iter().enumerate() {
-                if b == a || lb.class != LaneLineClass::DashedLine || sos[b].len() < 2 {
-                    continue;
-                }
-                let start = sos[b][0];
-                let gap = start[0] - end[0];
-                if !(-JOIN_DASHED_MAX_OVERLAP_M..=JOIN_DASHED_MAX_GAP_M).contains(&gap)
-                    || sos[b][sos[b].len() - 1][0] <= end[0]
-                    || sos[a][0][0] >= start[0]
-                {
-                    continue;
-                }
-                // Offsets where they meet: each line's at the other's end.
-                let (sa, oa): (Vec<f64>, Vec<f64>) = sos[a].iter().map(|q| (q[0], q[1])).unzip();
-                let (sb, ob): (Vec<f64>, Vec<f64>) = sos[b].iter().map(|q| (q[0], q[1])).unzip();
-                let at = 0.5 * (end[0] + start[0]);
-                let dev = (geom::interp_clamped(&sa, &oa, at) - geom::interp_clamped(&sb, &ob, at)).abs();
-                let o = 0.5 * (end[1] + start[1]);
-                let blocked = boxes.iter().any(|q| {
-                    q[0] < start[0].max(end[0]) + 0.5
-                        && q[1] > start[0].min(end[0]) - 0.5
-                        && o >= q[2] - 0.5
-                        && o <= q[3] + 0.5
-                });
-                if dev <= JOIN_DASHED_MAX_OFFSET_M && !blocked && best.is_none_or(|x| dev < x.2) {
-                    best = Some((a, b, dev));
-                }
-            }
+    // The dashed lines in the trajectory frame, by start.
+    let mut so: Vec<Option<Vec<[f64; 2]>>> = lines
+        .iter()
+        .map(|l| {
+            (l.class == LaneLineClass::DashedLine && l.line.len() >= 2)
+                .then(|| l.line.iter().map(|&v| refl.locate(v)).collect())
+        })
+        .collect();
+    let mut by_start: Vec<(f64, usize)> = so
+        .iter()
+        .enumerate()
+        .filter_map(|(k, q)| Some((q.as_ref()?[0][0], k)))
+        .collect();
+    by_start.sort_by(|x, y| x.0.total_cmp(&y.0));
+    let mut gone = vec![false; lines.len()];
+    for &(_, a) in &by_start {
+        // Line `a` takes on its best continuation for as long as it has one.
+        while !gone[a] {
+            let Some(sa_o) = so[a].as_ref() else { break };
+            let end = sa_o[sa_o.len() - 1];
+            let (sa, oa): (Vec<f64>, Vec<f64>) = sa_o.iter().map(|q| (q[0], q[1])).unzip();
+            let lo = by_start.partition_point(|x| x.0 < end[0] - JOIN_DASHED_MAX_OVERLAP_M);
+            let hi = by_start.partition_point(|x| x.0 <= end[0] + JOIN_DASHED_MAX_GAP_M);
+            let best = by_start[lo..hi]
+                .iter()
+                .filter(|&&(_, b)| b != a && !gone[b])
+                .filter_map(|&(_, b)| {
+                    let q = so[b].as_ref()?;
+                    let start = q[0];
+                    if q[q.len() - 1][0] <= end[0] || sa[0] >= start[0] {
+                        return None;
+                    }
+                    // Offsets where they meet: each line's at the middle of the joint.
+                    let (sb, ob): (Vec<f64>, Vec<f64>) = q.iter().map(|v| (v[0], v[1])).unzip();
+                    let at = 0.5 * (end[0] + start[0]);
+                    let dev = (geom::interp_clamped(&sa, &oa, at) - geom::interp_clamped(&sb, &ob, at)).abs();
+                    let o = 0.5 * (end[1] + start[1]);
+                    let (s0, s1) = (start[0].min(end[0]), start[0].max(end[0]));
+                    let blocked = boxes
+                        .iter()
+                        .any(|r| r[0] < s1 + 0.5 && r[1] > s0 - 0.5 && o >= r[2] - 0.5 && o <= r[3] + 0.5);
+                    (dev <= JOIN_DASHED_MAX_OFFSET_M && !blocked).then_some((b, dev))
+                })
+                .min_by(|x, y| x.1.total_cmp(&y.1));
+            let Some((b, _)) = best else { break };
+            let start_b = so[b].as_ref().map_or(f64::INFINITY, |q| q[0][0]);
+            let lb = lines[b].clone();
+            let la = &mut lines[a];
+            let keep: Vec<([f64; 2], [f64; 2])> = la
+                .line
+                .iter()
+                .copied()
+                .zip(sa_o.iter().copied())
+                .filter(|(_, q)| q[0] < start_b)
+                .collect();
+            let (len_a, len_b) = (la.length_m, lb.length_m);
+            la.line = keep.iter().map(|k| k.0).chain(lb.line.iter().copied()).collect();
+            la.length_m = geom::polyline_length(&la.line);
+            la.confidence = (la.confidence * len_a + lb.confidence * len_b) / (len_a + len_b).max(1e-9);
+            la.pieces.extend(lb.pieces.iter().copied());
+            let joined: Vec<[f64; 2]> = keep
+                .iter()
+                .map(|k| k.1)
+                .chain(so[b].take().into_iter().flatten())
+                .collect();
+            so[a] = Some(joined);
+            gone[b] = true;
         }
-        let Some((a, b, _)) = best else { break };
-        let lb = lines[b].clone();
-        let start_b = sos[b][0][0];
-        let la = &mut lines[a];
-        let keep: Vec<[f64; 2]> = la
-            .line
-            .iter()
-            .zip(&sos[a])
-            .filter(|(_, q)| q[0] < start_b)
-            .map(|(&v, _)| v)
-            .collect();
-        let (len_a, len_b) = (la.length_m, lb.length_m);
-        la.line = keep.into_iter().chain(lb.line.iter().copied()).collect();
-        la.length_m = geom::polyline_length(&la.line);
-        la.confidence = (la.confidence * len_a + lb.confidence * len_b) / (len_a + len_b).max(1e-9);
-        la.pieces.extend(lb.pieces.iter().copied());
-        lines.remove(b);
     }
+    let mut gone = gone.into_iter();
+    lines.retain(|_| !gone.next().unwrap_or(false));
 }
 
 /// The mouths of side streets, as barriers to lane-line growth (outlines): a crossing of a
