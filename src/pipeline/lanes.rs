@@ -1537,11 +1537,10 @@ impl Guide {
 
     /// Whether the paint covers [a, b] up to holes of [`GUIDE_MAX_HOLE_M`].
     fn covers(&self, a: f64, b: f64) -> bool {
-        let inside: Vec<&(f64, f64)> = self
-            .painted
-            .iter()
-            .filter(|iv| iv.1 >= a - GUIDE_END_SLACK_M && iv.0 <= b + GUIDE_END_SLACK_M)
-            .collect();
+        // The intervals are merged, so ordered by both ends.
+        let lo = self.painted.partition_point(|iv| iv.1 < a - GUIDE_END_SLACK_M);
+        let hi = self.painted.partition_point(|iv| iv.0 <= b + GUIDE_END_SLACK_M);
+        let inside: Vec<&(f64, f64)> = self.painted[lo..hi.max(lo)].iter().collect();
         let (Some(first), Some(last)) = (inside.first(), inside.last()) else {
             return false;
         };
