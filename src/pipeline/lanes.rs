@@ -79,8 +79,9 @@
 //!    the line follows the road's curvature through occlusions; across gaps of at least
 //!    8 m that another line within 25 m is painted along (`Guide`), the line follows that
 //!    line's course instead, at a difference interpolated linearly (the vehicle's sway,
-//!    which the trajectory frame carries, is the same for both). Sampled every `vertex_spacing_m`, mapped back through
-//!    the reference frame and simplified (Douglas–Peucker, `simplify_tolerance_m`).
+//!    which the trajectory frame carries, is the same for both). Sampled every
+//!    `vertex_spacing_m`, mapped back through the reference frame and simplified
+//!    (Douglas–Peucker, `simplify_tolerance_m`).
 //! 5. Lane lines shorter than `min_length_m` (a dashed stretch split off a chain at least
 //!    that long is held to the chain's length) or whose pieces cover less than
 //!    `min_paint_share` of their length, single named pieces that are not solid, and
@@ -670,41 +671,39 @@ pub fn grow_with_barriers(
     // Every line's paint guides the others across their long gaps (see `Guide`).
     let guides: Vec<Guide> = accepted.iter().map(|(_, m, _)| Guide::new(&items, m)).collect();
     for (k, (class, members, painted)) in accepted.into_iter().enumerate() {
-        {
-            let others = |j: usize| j != k;
-            let (line, rms) = centreline(
-                &items,
-                &members,
-                &refl,
-                p,
-                class == LaneLineClass::DashedLine,
-                (&guides, &others),
-            );
-            if line.len() < 2 {
-                continue;
-            }
-            let mean_conf = members.iter().map(|&m| items[m].conf).sum::<f64>() / members.len() as f64;
-            let support = (members.len() as f64 / 4.0).max(painted / 20.0).min(1.0);
-            let fit = (-(rms / 0.05).powi(2) / 2.0).exp();
-            let piece_class = class.marking_class();
-            out.classes.extend(
-                members
-                    .iter()
-                    .flat_map(|&m| items[m].keys.iter().map(move |&k| (k, piece_class))),
-            );
-            let start = refl.locate(line[0]);
-            out.lines.push(LaneResult {
-                class,
-                length_m: geom::polyline_length(&line),
-                line,
-                confidence: (mean_conf * (0.6 + 0.4 * support) * (0.5 + 0.5 * fit)).clamp(0.0, 1.0),
-                pieces: members
-                    .iter()
-                    .flat_map(|&m| items[m].keys.iter().copied())
-                    .collect(),
-                start,
-            });
+        let others = |j: usize| j != k;
+        let (line, rms) = centreline(
+            &items,
+            &members,
+            &refl,
+            p,
+            class == LaneLineClass::DashedLine,
+            (&guides, &others),
+        );
+        if line.len() < 2 {
+            continue;
         }
+        let mean_conf = members.iter().map(|&m| items[m].conf).sum::<f64>() / members.len() as f64;
+        let support = (members.len() as f64 / 4.0).max(painted / 20.0).min(1.0);
+        let fit = (-(rms / 0.05).powi(2) / 2.0).exp();
+        let piece_class = class.marking_class();
+        out.classes.extend(
+            members
+                .iter()
+                .flat_map(|&m| items[m].keys.iter().map(move |&k| (k, piece_class))),
+        );
+        let start = refl.locate(line[0]);
+        out.lines.push(LaneResult {
+            class,
+            length_m: geom::polyline_length(&line),
+            line,
+            confidence: (mean_conf * (0.6 + 0.4 * support) * (0.5 + 0.5 * fit)).clamp(0.0, 1.0),
+            pieces: members
+                .iter()
+                .flat_map(|&m| items[m].keys.iter().copied())
+                .collect(),
+            start,
+        });
     }
     out.lines.sort_by(|a, b| {
         a.start[0]
@@ -1510,10 +1509,11 @@ pub(crate) fn painted_share(painted: &[(f64, f64)], a: f64, b: f64) -> f64 {
 /// line's offset rose by 0.24 m and fell back over 60 m), so a line interpolated across a
 /// 40 m gap from its ends alone ran up to 0.29 m off (beyond the 0.15 m a lane line is held
 /// to). Lines painted all along such a gap sway the same way: across a gap of at least
-/// [`GUIDE_MIN_GAP_M`], the nearest line within [`GUIDE_MAX_DISTANCE_M`] whose paint covers
-/// the gap (holes ≤ [`GUIDE_MAX_HOLE_M`], ends within [`GUIDE_END_SLACK_M`]) carries the
-/// line: its offset plus the line's difference from it at the gap's ends, interpolated
-/// linearly (two lines that converge, a lane drop, converge linearly).
+/// [`GUIDE_MIN_GAP_M`], of the lines within [`GUIDE_MAX_DISTANCE_M`] whose paint covers the
+/// gap (holes ≤ [`GUIDE_MAX_HOLE_M`], ends within [`GUIDE_END_SLACK_M`]) the most painted
+/// along it, then the nearest, carries the line: its offset plus the line's difference from
+/// it at the gap's ends (fitted locally), interpolated linearly (two lines that converge, a
+/// lane drop, converge linearly).
 struct Guide {
     xs: Vec<f64>,
     ys: Vec<f64>,

@@ -837,12 +837,12 @@ fn dash_spans(l: &lanes::LaneResult, pieces: &[Piece]) -> Vec<dashes::Span> {
 /// the dashes on no lane line and not within `FRAGMENT_EXCLUSION_M` of one are chained in
 /// the trajectory frame (see [`fragment_chains`]: at least `FRAGMENT_LINE_MIN` pieces). A
 /// chain over at least `FRAGMENT_LINE_MIN_LENGTH_M` becomes a lane line: its pieces' offsets
-/// smoothed over `FRAGMENT_LINE_SMOOTHING_M`, refitted without pieces off it by more than
-/// `FRAGMENT_TOLERANCE_M` (the line itself: the course of a painted lane line beside it
-/// plus the smoothed difference from it, where one is), and dropped if it drifts across the road by more than
-/// `FRAGMENT_PARALLEL_M` relative to the lane line beside it (whose drift is its
-/// least-squares slope over the overlap: a bridged gap may wiggle). It is kept, dashed, only
-/// where its pieces fall on one phase of
+/// smoothed over `FRAGMENT_LINE_SMOOTHING_M` (where a painted lane line runs beside it, the
+/// guide: that line's course plus the smoothed difference from it), refitted without
+/// pieces off it by more than `FRAGMENT_TOLERANCE_M`, and dropped if it drifts across the
+/// road by more than `FRAGMENT_PARALLEL_M` relative to the lane line beside it (whose
+/// drift is its least-squares slope over the overlap: a bridged gap may wiggle). It is
+/// kept, dashed, only where its pieces fall on one phase of
 /// a lane-line dash design of the drive's other dashed lines (dashes at most
 /// `FRAGMENT_DESIGN_MAX_WIDTH_M` wide, the design of the most lane-line length tried
 /// first; see [`dashes::plan_on_designs`]), at least `FRAGMENT_ON_DASH_SHARE` of them
