@@ -336,7 +336,7 @@ fn refine_names_undecided_candidates_and_keeps_decisive_ones() {
         .collect();
     let direct = classifier().classify(&views).unwrap();
     let threshold = classifier().info().unknown_threshold as f64;
-    let stats = refine::refine(&mut cands, &cloud, &params).unwrap();
+    let stats = refine::refine(&mut cands, &cloud, &params, &classify::Params::default()).unwrap();
     assert_eq!(stats.examined, fx.len() + 1);
     let named = direct.iter().filter(|p| p.class != MarkingClass::Unknown).count();
     assert!(named >= fx.len() - 1, "{direct:?}");
@@ -358,7 +358,7 @@ fn refine_names_undecided_candidates_and_keeps_decisive_ones() {
     };
     let before = cands.clone();
     cands[0].class = MarkingClass::Unknown;
-    let stats = refine::refine(&mut cands, &cloud, &off).unwrap();
+    let stats = refine::refine(&mut cands, &cloud, &off, &classify::Params::default()).unwrap();
     assert_eq!(stats, refine::RefineStats::default());
     assert_eq!(cands[0].class, MarkingClass::Unknown);
     assert_eq!(cands[1..], before[1..]);
@@ -393,7 +393,7 @@ fn a_confident_dash_is_overruled_only_into_a_painted_object_the_network_is_sure_
         mode: refine::Mode::On,
         ..refine::Params::default()
     };
-    let stats = refine::refine(&mut cands, &cloud, &params).unwrap();
+    let stats = refine::refine(&mut cands, &cloud, &params, &classify::Params::default()).unwrap();
     assert_eq!(stats.examined, 4);
     assert_eq!(stats.reclassified, 1);
     assert_eq!(cands[0].class, MarkingClass::StraightArrow);
@@ -420,7 +420,7 @@ fn a_confident_dash_is_overruled_only_into_a_painted_object_the_network_is_sure_
         0.7,
         dir,
     )];
-    let stats = refine::refine(&mut again, &cloud, &strict).unwrap();
+    let stats = refine::refine(&mut again, &cloud, &strict, &classify::Params::default()).unwrap();
     assert_eq!((stats.examined, stats.reclassified), (1, 0));
     assert_eq!(again[0].class, MarkingClass::DashedLine);
     // A confident dash the network calls a crosswalk stripe stays a dash (the rules saw no
@@ -444,7 +444,7 @@ fn a_confident_dash_is_overruled_only_into_a_painted_object_the_network_is_sure_
         ..params.clone()
     };
     let mut lone = vec![candidate(&cloud, bar, MarkingClass::DashedLine, 0.7, dir)];
-    let stats = refine::refine(&mut lone, &cloud, &lenient).unwrap();
+    let stats = refine::refine(&mut lone, &cloud, &lenient, &classify::Params::default()).unwrap();
     assert_eq!((stats.examined, stats.reclassified), (1, 0));
     assert_eq!(lone[0].class, MarkingClass::DashedLine);
 }
@@ -469,7 +469,7 @@ fn a_short_solid_piece_is_overruled_into_a_painted_object_a_long_one_is_not_exam
         0.9,
         dir,
     )];
-    let stats = refine::refine(&mut short, &cloud, &params).unwrap();
+    let stats = refine::refine(&mut short, &cloud, &params, &classify::Params::default()).unwrap();
     assert_eq!((stats.examined, stats.reclassified), (1, 1));
     assert_eq!(short[0].class, MarkingClass::StraightArrow);
     let mut long = vec![candidate(
@@ -480,7 +480,7 @@ fn a_short_solid_piece_is_overruled_into_a_painted_object_a_long_one_is_not_exam
         dir,
     )];
     long[0].shape.length_m = classify::MAX_OBJECT_LENGTH_M + 1.0;
-    let stats = refine::refine(&mut long, &cloud, &params).unwrap();
+    let stats = refine::refine(&mut long, &cloud, &params, &classify::Params::default()).unwrap();
     assert_eq!((stats.examined, stats.reclassified), (0, 0));
     assert_eq!(long[0].class, MarkingClass::SolidLine);
 }
@@ -538,7 +538,7 @@ fn a_long_arrow_the_rules_peeled_apart_is_put_back_together() {
         mode: refine::Mode::On,
         ..refine::Params::default()
     };
-    let stats = refine::refine(&mut cands, &cloud, &params).unwrap();
+    let stats = refine::refine(&mut cands, &cloud, &params, &classify::Params::default()).unwrap();
     assert_eq!(stats.reassembled, 1);
     assert_eq!(cands.len(), 1);
     assert_eq!(cands[0].class, MarkingClass::StraightArrow);
@@ -554,7 +554,7 @@ fn a_long_arrow_the_rules_peeled_apart_is_put_back_together() {
         dash_overrule_confidence: 1.0,
         ..params
     };
-    let stats = refine::refine(&mut apart, &cloud, &strict).unwrap();
+    let stats = refine::refine(&mut apart, &cloud, &strict, &classify::Params::default()).unwrap();
     assert_eq!((stats.reassembled, apart.len()), (0, n));
 }
 
@@ -625,7 +625,14 @@ fn refine_overhead() {
     };
     let before = accuracy(&cands);
     let t0 = Instant::now();
-    let stats = refine::refine_with(c, &mut cands, &marks, &refine::Params::default()).unwrap();
+    let stats = refine::refine_with(
+        c,
+        &mut cands,
+        &marks,
+        &refine::Params::default(),
+        &classify::Params::default(),
+    )
+    .unwrap();
     let t_refine = t0.elapsed().as_secs_f64();
     let after = accuracy(&cands);
     println!(
@@ -702,7 +709,7 @@ fn an_unsure_glyph_stays_unknown() {
             0.4,
             [1.0, 0.0],
         )];
-        refine::refine(&mut cands, &cloud, &params).unwrap();
+        refine::refine(&mut cands, &cloud, &params, &classify::Params::default()).unwrap();
         cands[0].class
     };
     assert_eq!(with_bar(p + 0.01), MarkingClass::Unknown);
@@ -726,7 +733,7 @@ fn an_arrow_whose_branch_wore_off_the_shaft_is_put_back_together() {
         mode: refine::Mode::On,
         ..refine::Params::default()
     };
-    refine::refine(&mut cands, &cloud, &params).unwrap();
+    refine::refine(&mut cands, &cloud, &params, &classify::Params::default()).unwrap();
     let classes: Vec<_> = cands.iter().map(|c| (c.class, c.indices.len())).collect();
     assert_eq!(cands.len(), 1, "{classes:?}");
     assert_eq!(cands[0].class, MarkingClass::StraightRightArrow, "{classes:?}");
@@ -770,14 +777,14 @@ fn an_arrow_grouped_with_a_passing_line_piece_is_put_back_together_without_it() 
     // Without the alternative the group stays apart: with the line it is no arrow.
     let mut without: Vec<Candidate> = cands.clone();
     without.iter_mut().for_each(|c| c.alternatives.clear());
-    refine::refine(&mut without, &cloud, &params).unwrap();
+    refine::refine(&mut without, &cloud, &params, &classify::Params::default()).unwrap();
     assert_eq!(
         without.len(),
         3,
         "{:?}",
         without.iter().map(|c| c.class).collect::<Vec<_>>()
     );
-    let stats = refine::refine(&mut cands, &cloud, &params).unwrap();
+    let stats = refine::refine(&mut cands, &cloud, &params, &classify::Params::default()).unwrap();
     let classes: Vec<_> = cands.iter().map(|c| (c.class, c.indices.len())).collect();
     assert_eq!(stats.reassembled, 1, "{classes:?}");
     assert_eq!(cands.len(), 2, "{classes:?}");
@@ -787,7 +794,7 @@ fn an_arrow_grouped_with_a_passing_line_piece_is_put_back_together_without_it() 
 }
 
 /// The network names a candidate a crosswalk stripe only when its rectangle is no wider than
-/// a stripe (`crosswalk_max_width_m`): sparse far blobs of road noise 1–3 m wide read as
+/// a stripe (the rules' `crosswalk_max_width_m`): sparse far blobs of road noise 1–3 m wide read as
 /// stripes. The same points, a 5 × 0.45 m stripe, as a 0.45 m wide candidate become one; as a
 /// 1.2 m wide one (what such a blob measures) they keep their geometric class.
 #[test]
@@ -814,15 +821,15 @@ fn a_candidate_wider_than_a_stripe_is_no_crosswalk_stripe() {
             k
         })
         .collect();
-    refine::refine(&mut cands, &cloud, &params).unwrap();
+    refine::refine(&mut cands, &cloud, &params, &classify::Params::default()).unwrap();
     assert_eq!(cands[0].class, MarkingClass::Crosswalk);
     assert_eq!(cands[1].class, MarkingClass::Unknown);
-    // The bound is a parameter.
-    let wide = refine::Params {
+    // The bound is the rules' crosswalk width parameter.
+    let wide = classify::Params {
         crosswalk_max_width_m: 1.5,
-        ..params
+        ..classify::Params::default()
     };
     let mut again = vec![cands[1].clone()];
-    refine::refine(&mut again, &cloud, &wide).unwrap();
+    refine::refine(&mut again, &cloud, &params, &wide).unwrap();
     assert_eq!(again[0].class, MarkingClass::Crosswalk);
 }

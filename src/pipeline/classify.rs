@@ -121,6 +121,7 @@ pub struct Params {
     pub stop_min_width_m: f64,
     pub stop_max_width_m: f64,
     /// Crosswalk stripe width range (m). Defaults 0.3–0.65 (GB 0.40–0.45, MUTCD 0.3–0.6).
+    /// The learned classifier names no wider candidate a stripe either.
     pub crosswalk_min_width_m: f64,
     pub crosswalk_max_width_m: f64,
 }
@@ -143,7 +144,7 @@ impl Default for Params {
             stop_min_width_m: 0.15,
             stop_max_width_m: 0.65,
             crosswalk_min_width_m: 0.3,
-            crosswalk_max_width_m: CROSSWALK_MAX_WIDTH_M,
+            crosswalk_max_width_m: 0.65,
         }
     }
 }
@@ -294,10 +295,6 @@ pub struct Candidate {
     #[serde(skip)]
     pub alternatives: Vec<Arc<Candidate>>,
 }
-
-/// Widest crosswalk stripe (m): GB 5768 0.40–0.45, MUTCD 0.3–0.6 (12–24 in); the default of
-/// the rules' `crosswalk_max_width_m` and of the learned classifier's.
-pub const CROSSWALK_MAX_WIDTH_M: f64 = 0.65;
 
 /// Longest single painted object (m): GB 5768 highway arrows are 9 m, MUTCD arrows ≤ 7.3 m.
 pub const MAX_OBJECT_LENGTH_M: f64 = 12.0;

@@ -823,7 +823,7 @@ fn finish_clusters(
     // The classifier's reference line only needs the trajectory around these clusters.
     let (mut candidates, fragments) = classify::run_with_fragments(&cloud, &clusters, traj, &p.classify);
     // The learned classifier takes the candidates the geometric rules could not decide.
-    super::learned::refine(&mut candidates, &cloud, &p.learned)?;
+    super::learned::refine(&mut candidates, &cloud, &p.learned, &p.classify)?;
     classify::drop_thin_strokes(&mut candidates, &p.classify);
     ctx.stats.add(5, t0);
     let t0 = Instant::now();

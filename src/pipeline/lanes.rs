@@ -587,23 +587,7 @@ pub fn grow_with_barriers(
             .collect();
         seen.gap(&course, COURSE_HALF_WIDTH_M)
     };
-    // Barrier boxes in the trajectory frame (s0, s1, o0, o1), widened by 0.5 m across so
-    // the gaps between zebra stripes count too.
-    let boxes: Vec<[f64; 4]> = barriers
-        .iter()
-        .filter(|r| !r.is_empty())
-        .map(|r| {
-            let so: Vec<[f64; 2]> = r.iter().map(|&v| refl.locate(v)).collect();
-            let f = |k: usize, lo: bool| {
-                so.iter()
-                    .map(|q| q[k])
-                    .fold(if lo { f64::INFINITY } else { f64::NEG_INFINITY }, |a, b| {
-                        if lo { a.min(b) } else { a.max(b) }
-                    })
-            };
-            [f(0, true), f(0, false), f(1, true) - 0.5, f(1, false) + 0.5]
-        })
-        .collect();
+    let boxes = barrier_boxes(barriers, &refl);
     let mut items: Vec<Item> = pieces
         .iter()
         .filter(|q| {
@@ -671,14 +655,13 @@ pub fn grow_with_barriers(
     // Every line's paint guides the others across their long gaps (see `Guide`).
     let guides: Vec<Guide> = accepted.iter().map(|(_, m, _)| Guide::new(&items, m)).collect();
     for (k, (class, members, painted)) in accepted.into_iter().enumerate() {
-        let others = |j: usize| j != k;
         let (line, rms) = centreline(
             &items,
             &members,
             &refl,
             p,
             class == LaneLineClass::DashedLine,
-            (&guides, &others),
+            (&guides, k),
         );
         if line.len() < 2 {
             continue;
@@ -1196,9 +1179,22 @@ fn mean_of(so: &[[f64; 2]]) -> [f64; 2] {
     ]
 }
 
+/// Barrier outlines as (s, o) boxes [s0, s1, o0, o1], widened by 0.5 m across so the gaps
+/// between zebra stripes count too (for [`barrier_across`]).
+pub(crate) fn barrier_boxes(barriers: &[Vec<[f64; 2]>], refl: &RefLine) -> Vec<[f64; 4]> {
+    barriers
+        .iter()
+        .filter(|r| !r.is_empty())
+        .map(|r| {
+            let b = refl.box_of(r);
+            [b[0], b[1], b[2] - 0.5, b[3] + 0.5]
+        })
+        .collect()
+}
+
 /// Whether a barrier box (s0, s1, o0, o1) lies inside the gap from `s0` to `s1` (overlapping
 /// it by at least 0.1 m) at offset `o`.
-fn barrier_across(barriers: &[[f64; 4]], s0: f64, s1: f64, o: f64) -> bool {
+pub(crate) fn barrier_across(barriers: &[[f64; 4]], s0: f64, s1: f64, o: f64) -> bool {
     barriers
         .iter()
         .any(|b| b[0] < s1 - 0.1 && b[1] > s0 + 0.1 && o >= b[2] && o <= b[3])
@@ -1540,7 +1536,7 @@ impl Guide {
         // The intervals are merged, so ordered by both ends.
         let lo = self.painted.partition_point(|iv| iv.1 < a - GUIDE_END_SLACK_M);
         let hi = self.painted.partition_point(|iv| iv.0 <= b + GUIDE_END_SLACK_M);
-        let inside: Vec<&(f64, f64)> = self.painted[lo..hi.max(lo)].iter().collect();
+        let inside = &self.painted[lo..hi.max(lo)];
         let (Some(first), Some(last)) = (inside.first(), inside.last()) else {
             return false;
         };
@@ -1561,7 +1557,7 @@ fn centreline(
     refl: &RefLine,
     p: &Params,
     dashed: bool,
-    (guides, usable): (&[Guide], &dyn Fn(usize) -> bool),
+    (guides, own): (&[Guide], usize),
 ) -> (Vec<[f64; 2]>, f64) {
     // (s, o, member) samples sorted by s.
     let mut tagged: Vec<(f64, f64, usize)> = members
@@ -1618,7 +1614,7 @@ fn centreline(
             guides
                 .iter()
                 .enumerate()
-                .filter(|&(j, g)| usable(j) && g.covers(a, b))
+                .filter(|&(j, g)| j != own && g.covers(a, b))
                 .filter_map(|(_, g)| Some((g, (g.offset(a)? - oa).abs())))
                 .filter(|&(_, d)| d <= GUIDE_MAX_DISTANCE_M)
                 .max_by(|x, y| {

@@ -138,6 +138,14 @@ impl RefLine {
         self.frame_at(s).1
     }
 
+    /// The (s, o) box [s0, s1, o0, o1] of planar points (an outline).
+    pub fn box_of(&self, pts: &[[f64; 2]]) -> [f64; 4] {
+        pts.iter().map(|&v| self.locate(v)).fold(
+            [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY],
+            |a, q| [a[0].min(q[0]), a[1].max(q[0]), a[2].min(q[1]), a[3].max(q[1])],
+        )
+    }
+
     /// (s, o) of a planar point: arc length along the line and signed offset (left +).
     pub fn locate(&self, q: [f64; 2]) -> [f64; 2] {
         let nn = self

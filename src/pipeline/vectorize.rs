@@ -1408,21 +1408,13 @@ fn line_samples(pieces: &[Piece], refl: &RefLine) -> Vec<(usize, Vec<[f64; 2]>)>
         .collect()
 }
 
-/// Extent of an outline in the trajectory frame: [s0, s1, o0, o1].
-fn so_box(outline: &[[f64; 2]], refl: &RefLine) -> [f64; 4] {
-    outline.iter().map(|&v| refl.locate(v)).fold(
-        [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY],
-        |a, q| [a[0].min(q[0]), a[1].max(q[0]), a[2].min(q[1]), a[3].max(q[1])],
-    )
-}
-
 /// The (s, o) box of a stop line that lies across the road (at least twice as long across
 /// as along): what both stop-line context rules judge.
 fn stop_line_across(p: &Piece, refl: &RefLine) -> Option<[f64; 4]> {
     if p.marking.class != MarkingClass::StopLine || p.marking.outline.len() < 4 {
         return None;
     }
-    let b = so_box(&p.marking.outline, refl);
+    let b = refl.box_of(&p.marking.outline);
     (b[3] - b[2] >= 2.0 * (b[1] - b[0])).then_some(b)
 }
 
@@ -1467,7 +1459,7 @@ fn stop_lines_crossed_by_lines(pieces: &mut [Piece], refl: &RefLine) {
     let crossings: Vec<[f64; 4]> = pieces
         .iter()
         .filter(|p| p.marking.class == MarkingClass::Crosswalk)
-        .map(|p| so_box(&p.marking.outline, refl))
+        .map(|p| refl.box_of(&p.marking.outline))
         .collect();
     for p in pieces.iter_mut() {
         let Some([s0, s1, o0, o1]) = stop_line_across(p, refl) else {
@@ -1616,7 +1608,7 @@ fn lines_not_stop_lines(pieces: &mut [Piece], refl: &RefLine) {
         if p.marking.class != MarkingClass::StopLine || p.marking.outline.len() < 4 {
             continue;
         }
-        let [s0, s1, o0, o1] = so_box(&p.marking.outline, refl);
+        let [s0, s1, o0, o1] = refl.box_of(&p.marking.outline);
         // Along the road: its extent along is ≥ 3× its extent across (≲ 20°).
         if s1 - s0 < 3.0 * (o1 - o0) {
             continue;
@@ -1944,77 +1936,70 @@ const JOIN_DASHED_MAX_OFFSET_M: f64 = 0.15;
 /// in four). The joined line keeps both lines' pieces and the length-weighted mean
 /// confidence.
 fn join_dashed_lines(lines: &mut Vec<lanes::LaneResult>, barriers: &[Vec<[f64; 2]>], refl: &RefLine) {
-    let boxes: Vec<[f64; 4]> = barriers
-        .iter()
-        .filter(|r| !r.is_empty())
-        .map(|r| so_box(r, refl))
-        .collect();
-    // The dashed lines in the trajectory frame, by start.
-    let mut so: Vec<Option<Vec<[f64; 2]>>> = lines
+    let boxes = lanes::barrier_boxes(barriers, refl);
+    // The dashed lines' vertices in the trajectory frame as (mileages, offsets).
+    let mut so: Vec<Option<(Vec<f64>, Vec<f64>)>> = lines
         .iter()
         .map(|l| {
-            (l.class == LaneLineClass::DashedLine && l.line.len() >= 2)
-                .then(|| l.line.iter().map(|&v| refl.locate(v)).collect())
+            (l.class == LaneLineClass::DashedLine && l.line.len() >= 2).then(|| {
+                l.line
+                    .iter()
+                    .map(|&v| refl.locate(v))
+                    .map(|q| (q[0], q[1]))
+                    .unzip()
+            })
         })
         .collect();
     let mut by_start: Vec<(f64, usize)> = so
         .iter()
         .enumerate()
-        .filter_map(|(k, q)| Some((q.as_ref()?[0][0], k)))
+        .filter_map(|(k, q)| Some((q.as_ref()?.0[0], k)))
         .collect();
     by_start.sort_by(|x, y| x.0.total_cmp(&y.0));
     let mut gone = vec![false; lines.len()];
     for &(_, a) in &by_start {
         // Line `a` takes on its best continuation for as long as it has one.
-        while !gone[a] {
-            let Some(sa_o) = so[a].as_ref() else { break };
-            let end = sa_o[sa_o.len() - 1];
-            let (sa, oa): (Vec<f64>, Vec<f64>) = sa_o.iter().map(|q| (q[0], q[1])).unzip();
+        while let Some((sa, oa)) = so[a].as_ref() {
+            let end = [sa[sa.len() - 1], oa[oa.len() - 1]];
             let lo = by_start.partition_point(|x| x.0 < end[0] - JOIN_DASHED_MAX_OVERLAP_M);
             let hi = by_start.partition_point(|x| x.0 <= end[0] + JOIN_DASHED_MAX_GAP_M);
             let best = by_start[lo..hi]
                 .iter()
                 .filter(|&&(_, b)| b != a && !gone[b])
                 .filter_map(|&(_, b)| {
-                    let q = so[b].as_ref()?;
-                    let start = q[0];
-                    if q[q.len() - 1][0] <= end[0] || sa[0] >= start[0] {
+                    let (sb, ob) = so[b].as_ref()?;
+                    let start = [sb[0], ob[0]];
+                    if sb[sb.len() - 1] <= end[0] || sa[0] >= start[0] {
                         return None;
                     }
                     // Offsets where they meet: each line's at the middle of the joint.
-                    let (sb, ob): (Vec<f64>, Vec<f64>) = q.iter().map(|v| (v[0], v[1])).unzip();
                     let at = 0.5 * (end[0] + start[0]);
-                    let dev = (geom::interp_clamped(&sa, &oa, at) - geom::interp_clamped(&sb, &ob, at)).abs();
-                    let o = 0.5 * (end[1] + start[1]);
+                    let dev = (geom::interp_clamped(sa, oa, at) - geom::interp_clamped(sb, ob, at)).abs();
                     let (s0, s1) = (start[0].min(end[0]), start[0].max(end[0]));
-                    let blocked = boxes
-                        .iter()
-                        .any(|r| r[0] < s1 + 0.5 && r[1] > s0 - 0.5 && o >= r[2] - 0.5 && o <= r[3] + 0.5);
+                    let blocked = lanes::barrier_across(&boxes, s0, s1, 0.5 * (end[1] + start[1]));
                     (dev <= JOIN_DASHED_MAX_OFFSET_M && !blocked).then_some((b, dev))
                 })
                 .min_by(|x, y| x.1.total_cmp(&y.1));
             let Some((b, _)) = best else { break };
-            let start_b = so[b].as_ref().map_or(f64::INFINITY, |q| q[0][0]);
-            let lb = lines[b].clone();
+            let start_b = so[b].as_ref().map_or(f64::INFINITY, |q| q.0[0]);
+            let kept = sa.partition_point(|&v| v < start_b);
+            let (sb, ob) = so[b].take().expect("a candidate has vertices");
+            let (mut sa, mut oa) = so[a].take().expect("line a has vertices");
+            let lb = &lines[b];
+            let (line_b, len_b, conf_b, pieces_b) =
+                (lb.line.clone(), lb.length_m, lb.confidence, lb.pieces.clone());
             let la = &mut lines[a];
-            let keep: Vec<([f64; 2], [f64; 2])> = la
-                .line
-                .iter()
-                .copied()
-                .zip(sa_o.iter().copied())
-                .filter(|(_, q)| q[0] < start_b)
-                .collect();
-            let (len_a, len_b) = (la.length_m, lb.length_m);
-            la.line = keep.iter().map(|k| k.0).chain(lb.line.iter().copied()).collect();
+            la.line.truncate(kept);
+            la.line.extend(line_b);
+            let len_a = la.length_m;
             la.length_m = geom::polyline_length(&la.line);
-            la.confidence = (la.confidence * len_a + lb.confidence * len_b) / (len_a + len_b).max(1e-9);
-            la.pieces.extend(lb.pieces.iter().copied());
-            let joined: Vec<[f64; 2]> = keep
-                .iter()
-                .map(|k| k.1)
-                .chain(so[b].take().into_iter().flatten())
-                .collect();
-            so[a] = Some(joined);
+            la.confidence = (la.confidence * len_a + conf_b * len_b) / (len_a + len_b).max(1e-9);
+            la.pieces.extend(pieces_b);
+            sa.truncate(kept);
+            oa.truncate(kept);
+            sa.extend(sb);
+            oa.extend(ob);
+            so[a] = Some((sa, oa));
             gone[b] = true;
         }
     }
@@ -2033,47 +2018,61 @@ fn join_dashed_lines(lines: &mut Vec<lanes::LaneResult>, barriers: &[Vec<[f64; 2
 /// across the mouth, a metre from the ends of the crossing's stripes). The crossings of the
 /// road itself lie along it and are barriers as they are.
 fn side_crossing_mouths(pieces: &[Piece], refl: &RefLine) -> Vec<Vec<[f64; 2]>> {
-    let mut stripes: Vec<[f64; 4]> = pieces
-        .iter()
-        .filter(|p| p.marking.class == MarkingClass::Crosswalk && p.marking.outline.len() >= 3)
-        .map(|p| so_box(&p.marking.outline, refl))
-        .filter(|b| b[3] - b[2] >= 2.0 * (b[1] - b[0]) && (b[2] > 0.0 || b[3] < 0.0))
-        .collect();
-    stripes.sort_by(|a, b| a[0].total_cmp(&b[0]));
+    let across = crosswalk_boxes(pieces, refl, |b| b[3] - b[2] >= 2.0 * (b[1] - b[0]));
     let mut mouths = Vec::new();
     for side in [1.0, -1.0] {
-        let mut row: Option<([f64; 4], usize)> = None;
-        let mut close = |row: Option<([f64; 4], usize)>| {
-            if let Some(([s0, s1, o0, o1], n)) = row
-                && n >= SIDE_CROSSING_MIN_STRIPES
-            {
-                let (o0, o1) = if side > 0.0 {
-                    (o0 - SIDE_CROSSING_REACH_M, o1)
-                } else {
-                    (o0, o1 + SIDE_CROSSING_REACH_M)
-                };
-                mouths.push(vec![
-                    refl.point(s0, o0),
-                    refl.point(s1, o0),
-                    refl.point(s1, o1),
-                    refl.point(s0, o1),
-                ]);
+        let on_side: Vec<[f64; 4]> = across
+            .iter()
+            .copied()
+            .filter(|b| side * b[2] > 0.0 && side * b[3] > 0.0)
+            .collect();
+        for ([s0, s1, o0, o1], n) in stripe_rows(&on_side, SIDE_CROSSING_MAX_GAP_M) {
+            if n < SIDE_CROSSING_MIN_STRIPES {
+                continue;
             }
-        };
-        for b in stripes.iter().filter(|b| side * b[2] > 0.0) {
-            row = match row {
-                Some((r, n)) if b[0] <= r[1] + SIDE_CROSSING_MAX_GAP_M => {
-                    Some(([r[0], r[1].max(b[1]), r[2].min(b[2]), r[3].max(b[3])], n + 1))
-                }
-                other => {
-                    close(other);
-                    Some((*b, 1))
-                }
+            // Widened toward the road.
+            let (o0, o1) = if side > 0.0 {
+                (o0 - SIDE_CROSSING_REACH_M, o1)
+            } else {
+                (o0, o1 + SIDE_CROSSING_REACH_M)
             };
+            mouths.push(vec![
+                refl.point(s0, o0),
+                refl.point(s1, o0),
+                refl.point(s1, o1),
+                refl.point(s0, o1),
+            ]);
         }
-        close(row);
     }
     mouths
+}
+
+/// The (s, o) boxes of the crosswalk stripes whose box passes `keep`, ordered by s.
+fn crosswalk_boxes(pieces: &[Piece], refl: &RefLine, keep: impl Fn(&[f64; 4]) -> bool) -> Vec<[f64; 4]> {
+    let mut boxes: Vec<[f64; 4]> = pieces
+        .iter()
+        .filter(|p| p.marking.class == MarkingClass::Crosswalk && p.marking.outline.len() >= 3)
+        .map(|p| refl.box_of(&p.marking.outline))
+        .filter(|b| keep(b))
+        .collect();
+    boxes.sort_by(|a, b| a[0].total_cmp(&b[0]));
+    boxes
+}
+
+/// Rows of stripe boxes ordered by s: each box joins the row before it when it starts at
+/// most `max_gap` (m) after the row's end; each row's union box and number of stripes.
+fn stripe_rows(boxes: &[[f64; 4]], max_gap: f64) -> Vec<([f64; 4], usize)> {
+    let mut rows: Vec<([f64; 4], usize)> = Vec::new();
+    for b in boxes {
+        match rows.last_mut() {
+            Some((r, n)) if b[0] <= r[1] + max_gap => {
+                *r = [r[0], r[1].max(b[1]), r[2].min(b[2]), r[3].max(b[3])];
+                *n += 1;
+            }
+            _ => rows.push((*b, 1)),
+        }
+    }
+    rows
 }
 
 /// The bars across the road, in the trajectory frame [s0, s1, o0, o1]: stop lines lying
@@ -2082,25 +2081,8 @@ fn side_crossing_mouths(pieces: &[Piece], refl: &RefLine) -> Vec<Vec<[f64; 2]>> 
 fn bars_across(pieces: &[Piece], refl: &RefLine) -> Vec<[f64; 4]> {
     let mut bars: Vec<[f64; 4]> = pieces.iter().filter_map(|p| stop_line_across(p, refl)).collect();
     // Stripes along the road (a crossing of it; those across it cross a side street).
-    let mut stripes: Vec<[f64; 4]> = pieces
-        .iter()
-        .filter(|p| p.marking.class == MarkingClass::Crosswalk && p.marking.outline.len() >= 3)
-        .map(|p| so_box(&p.marking.outline, refl))
-        .filter(|b| b[1] - b[0] >= 2.0 * (b[3] - b[2]))
-        .collect();
-    stripes.sort_by(|a, b| a[0].total_cmp(&b[0]));
-    let mut crossing: Option<[f64; 4]> = None;
-    for b in stripes {
-        crossing = match crossing {
-            Some(c) if b[0] <= c[1] => Some([c[0], c[1].max(b[1]), c[2].min(b[2]), c[3].max(b[3])]),
-            Some(c) => {
-                bars.push(c);
-                Some(b)
-            }
-            None => Some(b),
-        };
-    }
-    bars.extend(crossing);
+    let along = crosswalk_boxes(pieces, refl, |b| b[1] - b[0] >= 2.0 * (b[3] - b[2]));
+    bars.extend(stripe_rows(&along, 0.0).into_iter().map(|(b, _)| b));
     bars.retain(|b| b[3] - b[2] >= BAR_MIN_ACROSS_M);
     bars
 }

@@ -19,7 +19,8 @@
 //!    - network says a class with `p` ≥ threshold: that class, confidence `p` (a geometric
 //!      class with low confidence is overruled; when both agree the larger confidence stays);
 //!    - network below the threshold (or says `unknown`), or a crosswalk stripe wider than
-//!      `crosswalk_max_width_m`: the candidate keeps its geometric class; an `unknown`
+//!      the rules allow a stripe (`classify.crosswalk_max_width_m`, see [`fits_stripe`]):
+//!      the candidate keeps its geometric class; an `unknown`
 //!      candidate gets confidence = the network's `unknown` confidence;
 //!    - a confident dash or a solid piece no longer than a painted object (the rules' bar
 //!      test cannot tell a dash from a straight arrow whose head is worn or too sparsely
@@ -48,8 +49,7 @@
 //! candidates unchanged with a warning; `on`: a missing runtime is an error; `off`),
 //! `decisive_confidence` (default 0.5: below it a geometric class is re-examined),
 //! `dash_overrule_confidence` (default 0.8), `glyph_min_confidence` (default 0.5: an
-//! undecided candidate becomes an arrow or a diamond only at this probability),
-//! `crosswalk_max_width_m` (default 0.65: no wider candidate becomes a crosswalk stripe).
+//! undecided candidate becomes an arrow or a diamond only at this probability).
 //!
 //! # Complexity
 //! O(m·n) feature preparation per selected cluster of m points (n = 256), plus one network
@@ -59,7 +59,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{Classifier, ClusterPoints};
 use crate::pipeline::PipelineError;
-use crate::pipeline::classify::{Candidate, MAX_OBJECT_LENGTH_M, shared_unions};
+use crate::pipeline::classify::{self, Candidate, MAX_OBJECT_LENGTH_M, shared_unions};
 use crate::pipeline::types::{MarkingClass, PointCloud};
 
 /// When the learned classifier runs.
@@ -97,14 +97,6 @@ pub struct Params {
     /// arrow's few scan rows) are not the training set's clusters. Below it the candidate
     /// stays `unknown`.
     pub glyph_min_confidence: f64,
-    /// The network names a candidate a crosswalk stripe only when its rectangle is at most
-    /// this wide (m; default 0.65, as the rules' `classify.crosswalk_max_width_m`). Sparse
-    /// far clusters 1–3 m wide, ten to forty points of road noise in a far carriageway
-    /// scanned at 100 lines/s, read as stripes at p = 0.33–0.93; on 29 simulated drives
-    /// (200 and 100–250 lines/s) every stripe the pipeline got right was at most 0.61 m
-    /// wide, and 47 of its 59 wrong stripes were wider than 0.7 m. A wider candidate the
-    /// network calls a stripe keeps its geometric class.
-    pub crosswalk_max_width_m: f64,
 }
 
 impl Default for Params {
@@ -114,7 +106,6 @@ impl Default for Params {
             decisive_confidence: 0.5,
             dash_overrule_confidence: 0.8,
             glyph_min_confidence: 0.5,
-            crosswalk_max_width_m: crate::pipeline::classify::CROSSWALK_MAX_WIDTH_M,
         }
     }
 }
@@ -128,8 +119,7 @@ impl Params {
             0.0,
             1.0,
         )?;
-        crate::pipeline::pavement::check_range("glyph_min_confidence", self.glyph_min_confidence, 0.0, 1.0)?;
-        crate::pipeline::pavement::check_range("crosswalk_max_width_m", self.crosswalk_max_width_m, 0.0, 5.0)
+        crate::pipeline::pavement::check_range("glyph_min_confidence", self.glyph_min_confidence, 0.0, 1.0)
     }
 }
 
@@ -149,6 +139,7 @@ pub fn refine(
     candidates: &mut Vec<Candidate>,
     cloud: &PointCloud,
     params: &Params,
+    rules: &classify::Params,
 ) -> Result<RefineStats, PipelineError> {
     if params.mode == Mode::Off {
         return Ok(RefineStats::default());
@@ -161,7 +152,7 @@ pub fn refine(
         }
         Err(e) => return Err(e),
     };
-    refine_with(classifier, candidates, cloud, params)
+    refine_with(classifier, candidates, cloud, params, rules)
 }
 
 /// [`refine`] with an explicit classifier.
@@ -170,6 +161,7 @@ pub fn refine_with(
     candidates: &mut Vec<Candidate>,
     cloud: &PointCloud,
     params: &Params,
+    rules: &classify::Params,
 ) -> Result<RefineStats, PipelineError> {
     // A confident dash is still shown to the network, which may only turn it into another
     // painted object, and only when sure (`dash_overrule_confidence`).
@@ -232,7 +224,7 @@ pub fn refine_with(
         } else {
             pred.class != MarkingClass::Unknown
                 && top >= if glyph(pred.class) { glyph_min } else { threshold }
-                && (pred.class != MarkingClass::Crosswalk || c.shape.width_m <= params.crosswalk_max_width_m)
+                && (pred.class != MarkingClass::Crosswalk || fits_stripe(c, rules))
         };
         if accepted {
             if pred.class == c.class {
@@ -299,6 +291,17 @@ pub fn refine_with(
     let mut keep = keep.into_iter();
     candidates.retain(|_| keep.next().unwrap_or(true));
     Ok(stats)
+}
+
+/// The network names a candidate a crosswalk stripe only when its rectangle is no wider
+/// than the rules allow a stripe (`classify.crosswalk_max_width_m`, default 0.65 m). Sparse
+/// far clusters 1–3 m wide, ten to forty points of road noise in a far carriageway
+/// scanned at 100 lines/s, read as stripes at p = 0.33–0.93; on 29 simulated drives
+/// (200 and 100–250 lines/s) every stripe the pipeline got right was at most 0.61 m
+/// wide, and 47 of its 59 wrong stripes were wider than 0.7 m. A wider candidate the
+/// network calls a stripe keeps its geometric class.
+fn fits_stripe(c: &Candidate, rules: &classify::Params) -> bool {
+    c.shape.width_m <= rules.crosswalk_max_width_m
 }
 
 /// Least probability at which the network's name for a group's union without one of its
